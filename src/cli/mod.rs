@@ -1,0 +1,148 @@
+//! Argument parsing and the subcommands.
+
+mod progress;
+mod run;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use squall_topology::spec::SpecErrors;
+use squall_topology::{Override, Topology, TopologySpec};
+
+/// Exit code for an invalid topology or usage error.
+const EXIT_INVALID: u8 = 2;
+/// Exit code for a run that failed.
+const EXIT_FAILED: u8 = 1;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "squall",
+    version,
+    about = "Storm-like stream topologies for cloud robotics",
+    after_help = "Examples:\n  \
+        squall run examples/topologies/wordcount.toml --out out/wc\n  \
+        squall run examples/topologies/probe.toml --set source.params.count=100000 --set relay.parallelism=2\n  \
+        squall validate examples/topologies/wordcount.toml\n  \
+        squall graph examples/topologies/wordcount.toml | dot -Tsvg > wc.svg\n  \
+        squall kinds\n\n\
+        Exit codes: 0 success, 1 the run failed, 2 invalid topology or arguments."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// Options shared by the commands that read a topology.
+#[derive(Debug, clap::Args)]
+struct TopologyArgs {
+    /// The topology file (TOML).
+    file: PathBuf,
+    /// Override any value before validation: COMPONENT.KEY[.KEY...]=VALUE or
+    /// topology.KEY=VALUE, e.g. matcher.parallelism=4 or
+    /// matcher.params.particles=60. Repeatable.
+    #[arg(long = "set", value_name = "PATH=VALUE", value_parser = parse_override)]
+    overrides: Vec<Override>,
+}
+
+fn parse_override(s: &str) -> Result<Override, String> {
+    s.parse()
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a topology in this process; print a per-component summary.
+    Run {
+        #[command(flatten)]
+        topology: TopologyArgs,
+        /// Write metrics.json (and the components' outputs) here.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Do not print the summary table.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Check a topology without running it.
+    Validate {
+        #[command(flatten)]
+        topology: TopologyArgs,
+    },
+    /// Print a topology as a Graphviz DOT graph.
+    Graph {
+        #[command(flatten)]
+        topology: TopologyArgs,
+    },
+    /// List the component kinds this binary knows.
+    Kinds,
+}
+
+/// Parses arguments, runs the command, maps errors to exit codes.
+pub(crate) fn main() -> ExitCode {
+    init_logging();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { ExitCode::from(EXIT_INVALID) } else { ExitCode::SUCCESS };
+        }
+    };
+    match cli.command {
+        Command::Run { topology, out, quiet } => {
+            match load(&topology) {
+                Ok(t) => run::run(&t, out, quiet),
+                Err(code) => code,
+            }
+        }
+        Command::Validate { topology } => match load(&topology) {
+            Ok(t) => {
+                let tasks: usize = t.spec().components.iter().map(|c| c.parallelism).sum();
+                println!(
+                    "{}: topology \"{}\" is valid ({} components, {tasks} tasks)",
+                    topology.file.display(),
+                    t.name(),
+                    t.spec().components.len()
+                );
+                ExitCode::SUCCESS
+            }
+            Err(code) => code,
+        },
+        Command::Graph { topology } => match load(&topology) {
+            Ok(t) => {
+                print!("{}", squall_topology::graph::to_dot(&t));
+                ExitCode::SUCCESS
+            }
+            Err(code) => code,
+        },
+        Command::Kinds => {
+            let registry = squall::builtin::registry();
+            println!("spouts:");
+            for k in registry.spout_kinds() {
+                println!("  {k}");
+            }
+            println!("bolts:");
+            for k in registry.bolt_kinds() {
+                println!("  {k}");
+            }
+            ExitCode::SUCCESS
+        }
+    }
+}
+
+/// Parses and validates a topology; on failure prints every error and
+/// returns the exit code.
+fn load(args: &TopologyArgs) -> Result<Topology, ExitCode> {
+    let registry = squall::builtin::registry();
+    let validated = TopologySpec::load(&args.file, &args.overrides)
+        .and_then(|spec| Topology::validate(spec, &registry));
+    validated.map_err(|errors: SpecErrors| {
+        eprintln!("{errors}");
+        eprintln!("error: invalid topology ({} problem{})", errors.0.len(), if errors.0.len() == 1 { "" } else { "s" });
+        ExitCode::from(EXIT_INVALID)
+    })
+}
+
+fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("SQUALL_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}

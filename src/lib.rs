@@ -1,0 +1,12 @@
+//! squall: Storm-like stream topologies for cloud robotics.
+//!
+//! This facade re-exports the engine ([`topology`]), the robotics bolts
+//! ([`bolts`]) and the sources ([`spouts`]), and holds the registry of every
+//! built-in component kind ([`builtin::registry`]) that the `squall` binary
+//! uses.
+
+pub mod builtin;
+
+pub use squall_bolts as bolts;
+pub use squall_spouts as spouts;
+pub use squall_topology as topology;

@@ -1,0 +1,61 @@
+//! What a task knows about itself and its run.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+use crate::runtime::local::Progress;
+
+/// The identity and environment of one task, given to `open`/`prepare`.
+#[derive(Debug, Clone)]
+pub struct TaskContext {
+    pub(crate) topology: Arc<str>,
+    pub(crate) component: Arc<str>,
+    pub(crate) task_index: usize,
+    pub(crate) task_count: usize,
+    pub(crate) seed: u64,
+    pub(crate) out_dir: Option<Arc<PathBuf>>,
+    pub(crate) progress: Option<Arc<Progress>>,
+}
+
+impl TaskContext {
+    /// The topology's name.
+    pub fn topology(&self) -> &str {
+        &self.topology
+    }
+
+    /// This component's name.
+    pub fn component(&self) -> &str {
+        &self.component
+    }
+
+    /// This task's index in `0..task_count()`.
+    pub fn task_index(&self) -> usize {
+        self.task_index
+    }
+
+    /// The component's parallelism.
+    pub fn task_count(&self) -> usize {
+        self.task_count
+    }
+
+    /// The run's seed (`[topology] seed`). Derive random streams from it and
+    /// from what they are for, never from the task index, so that results
+    /// do not depend on parallelism.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The run's output directory, when one was given.
+    pub fn out_dir(&self) -> Option<&Path> {
+        self.out_dir.as_deref().map(|p| p.as_path())
+    }
+
+    /// Tells the progress display how many tuples this task will emit in
+    /// all (spouts that know, e.g. a log reader after counting its records).
+    pub fn expect_emits(&self, total: u64) {
+        if let Some(p) = &self.progress {
+            p.expected.fetch_add(total, Ordering::Relaxed);
+        }
+    }
+}

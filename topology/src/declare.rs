@@ -1,0 +1,124 @@
+//! What a component declares about itself: output streams, accepted inputs,
+//! a peer message type and a tick period.
+
+use std::time::Duration;
+
+use crate::message::{Message, MessageType};
+
+/// The default stream name, used when a subscription names no stream.
+pub const DEFAULT_STREAM: &str = "default";
+
+/// One declared output stream.
+#[derive(Debug, Clone)]
+pub struct StreamDecl {
+    /// The stream's name, unique within the component.
+    pub name: String,
+    /// The one type it carries.
+    pub message: MessageType,
+}
+
+/// The input types a bolt accepts.
+#[derive(Debug, Clone, Default)]
+pub enum Accepts {
+    /// Only these types.
+    #[default]
+    Nothing,
+    /// Only these types.
+    Types(Vec<MessageType>),
+    /// Any type (sinks, counters, loggers).
+    Any,
+}
+
+impl Accepts {
+    /// Whether a stream of type `t` may feed this component.
+    pub fn accepts(&self, t: &MessageType) -> bool {
+        match self {
+            Accepts::Nothing => false,
+            Accepts::Types(ts) => ts.contains(t),
+            Accepts::Any => true,
+        }
+    }
+
+    /// A readable list for error messages.
+    pub fn describe(&self) -> String {
+        match self {
+            Accepts::Nothing => "no input".to_string(),
+            Accepts::Any => "any type".to_string(),
+            Accepts::Types(ts) => ts.iter().map(|t| t.name()).collect::<Vec<_>>().join(", "),
+        }
+    }
+}
+
+/// Collects a component's declarations; passed to `declare`.
+#[derive(Debug, Clone, Default)]
+pub struct Declarer {
+    pub(crate) outputs: Vec<StreamDecl>,
+    pub(crate) accepts: Accepts,
+    pub(crate) peer: Option<MessageType>,
+    pub(crate) tick: Option<Duration>,
+}
+
+impl Declarer {
+    /// Declares an output stream `name` carrying `T`. Declaring a name twice
+    /// keeps the last declaration.
+    pub fn output<T: Message>(&mut self, name: &str) -> &mut Self {
+        self.outputs.retain(|s| s.name != name);
+        self.outputs.push(StreamDecl { name: name.to_string(), message: MessageType::of::<T>() });
+        self
+    }
+
+    /// Accepts input streams carrying `T` (bolts only).
+    pub fn input<T: Message>(&mut self) -> &mut Self {
+        let t = MessageType::of::<T>();
+        match &mut self.accepts {
+            Accepts::Types(ts) => {
+                if !ts.contains(&t) {
+                    ts.push(t);
+                }
+            }
+            Accepts::Nothing => self.accepts = Accepts::Types(vec![t]),
+            Accepts::Any => {}
+        }
+        self
+    }
+
+    /// Accepts input streams of any type (bolts only).
+    pub fn any_input(&mut self) -> &mut Self {
+        self.accepts = Accepts::Any;
+        self
+    }
+
+    /// Declares the type tasks of this component send each other by index
+    /// (peer exchange).
+    pub fn peer<T: Message>(&mut self) -> &mut Self {
+        self.peer = Some(MessageType::of::<T>());
+        self
+    }
+
+    /// Asks for a tick every `period`. A topology file's `tick_secs`
+    /// overrides it.
+    pub fn tick(&mut self, period: Duration) -> &mut Self {
+        self.tick = Some(period);
+        self
+    }
+
+    /// The declared output streams.
+    pub fn outputs(&self) -> &[StreamDecl] {
+        &self.outputs
+    }
+
+    /// The accepted input types.
+    pub fn accepts(&self) -> &Accepts {
+        &self.accepts
+    }
+
+    /// The declared peer type, if any.
+    pub fn peer_type(&self) -> Option<MessageType> {
+        self.peer
+    }
+
+    /// The stream called `name`, if declared.
+    pub fn stream(&self, name: &str) -> Option<&StreamDecl> {
+        self.outputs.iter().find(|s| s.name == name)
+    }
+}

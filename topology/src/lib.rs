@@ -1,0 +1,50 @@
+//! squall-topology: the stream topology engine.
+//!
+//! Storm's model, in Rust: **spouts** produce tuples, **bolts** consume and
+//! emit them, each component runs as `parallelism` tasks, and every
+//! subscription chooses a **grouping** (shuffle, fields, all, global, direct,
+//! local-or-shuffle). Topologies are declared in TOML ([`spec`]), checked
+//! against a [`Registry`] of component kinds ([`Topology::validate`]) and run
+//! by a runtime ([`runtime::local::run`]). The engine knows nothing about
+//! robots.
+//!
+//! Guarantees of the in-process runtime:
+//! - every queue is bounded; a full queue blocks the producer or drops by
+//!   policy, and every drop is counted;
+//! - a run ends when the spouts are exhausted and every tuple is processed;
+//! - a panic names its component and fails the run (or restarts the task);
+//! - opt-in acking replays failed or timed-out spout tuples.
+
+mod component;
+mod context;
+mod declare;
+mod error;
+mod field_hash;
+pub mod fsio;
+mod grouping;
+pub mod graph;
+mod introspect;
+mod message;
+pub mod metrics;
+mod params;
+mod plan;
+mod registry;
+pub mod runtime;
+pub mod spec;
+mod tuple;
+
+pub use component::{Bolt, MessageId, Spout, SpoutStatus};
+pub use context::TaskContext;
+pub use declare::{Accepts, DEFAULT_STREAM, Declarer, StreamDecl};
+pub use error::{BoxError, EmitError, ParamError};
+pub use field_hash::FieldHashError;
+pub use grouping::{Grouping, OverflowPolicy};
+pub use message::{Message, MessageType, Payload};
+pub use metrics::RunReport;
+pub use params::Params;
+pub use plan::Topology;
+pub use registry::Registry;
+pub use runtime::local::emitter::Emitter;
+pub use runtime::local::{Progress, RunError, RunOptions, run};
+pub use spec::{Override, TopologySpec};
+pub use tuple::{Source, Tuple};

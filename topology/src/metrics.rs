@@ -1,0 +1,368 @@
+//! Per-task and per-component run metrics, and the summary table.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::time::Duration;
+
+use hdrhistogram::Histogram;
+use serde::Serialize;
+
+use crate::spec::Role;
+
+/// Histogram bounds: 1 ns .. 1 hour, 3 significant digits.
+fn new_histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("valid histogram bounds")
+}
+
+/// What one task counts while it runs (owned by the task's thread).
+#[derive(Debug, Clone)]
+pub(crate) struct TaskStats {
+    pub(crate) received: u64,
+    pub(crate) emitted: u64,
+    pub(crate) busy: Duration,
+    pub(crate) wall: Duration,
+    pub(crate) latency: Histogram<u64>,
+    pub(crate) restarts: u32,
+    pub(crate) acked: u64,
+    pub(crate) failed: u64,
+    pub(crate) replayed: u64,
+    pub(crate) abandoned: u64,
+    pub(crate) custom: BTreeMap<String, Custom>,
+}
+
+/// A metric a component records itself (`Emitter::count`, `Emitter::record`).
+#[derive(Debug, Clone)]
+pub(crate) enum Custom {
+    Counter(u64),
+    Values(Box<Histogram<u64>>),
+}
+
+impl Default for TaskStats {
+    fn default() -> Self {
+        TaskStats {
+            received: 0,
+            emitted: 0,
+            busy: Duration::ZERO,
+            wall: Duration::ZERO,
+            latency: new_histogram(),
+            restarts: 0,
+            acked: 0,
+            failed: 0,
+            replayed: 0,
+            abandoned: 0,
+            custom: BTreeMap::new(),
+        }
+    }
+}
+
+impl TaskStats {
+    pub(crate) fn count(&mut self, name: &str, delta: u64) {
+        match self.custom.get_mut(name) {
+            Some(Custom::Counter(c)) => *c += delta,
+            Some(Custom::Values(_)) => {}
+            None => {
+                self.custom.insert(name.to_string(), Custom::Counter(delta));
+            }
+        }
+    }
+
+    pub(crate) fn record(&mut self, name: &str, value: u64) {
+        match self.custom.get_mut(name) {
+            Some(Custom::Values(h)) => h.saturating_record(value.max(1)),
+            Some(Custom::Counter(_)) => {}
+            None => {
+                let mut h = Box::new(new_histogram());
+                h.saturating_record(value.max(1));
+                self.custom.insert(name.to_string(), Custom::Values(h));
+            }
+        }
+    }
+}
+
+/// Percentiles of a latency histogram, in microseconds.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct Latency {
+    /// Samples.
+    pub count: u64,
+    /// Mean.
+    pub mean_us: f64,
+    /// Median.
+    pub p50_us: f64,
+    /// 99th percentile.
+    pub p99_us: f64,
+    /// Maximum.
+    pub max_us: f64,
+}
+
+impl Latency {
+    fn of(h: &Histogram<u64>) -> Self {
+        if h.is_empty() {
+            return Latency::default();
+        }
+        let us = |ns: u64| ns as f64 / 1e3;
+        Latency {
+            count: h.len(),
+            mean_us: h.mean() / 1e3,
+            p50_us: us(h.value_at_quantile(0.5)),
+            p99_us: us(h.value_at_quantile(0.99)),
+            max_us: us(h.max()),
+        }
+    }
+}
+
+/// A summary of a recorded custom metric.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum CustomMetric {
+    /// A counter's total.
+    Counter(u64),
+    /// Recorded values.
+    Values {
+        /// Samples.
+        count: u64,
+        /// Mean.
+        mean: f64,
+        /// Median.
+        p50: u64,
+        /// 99th percentile.
+        p99: u64,
+        /// Maximum.
+        max: u64,
+    },
+}
+
+fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<String, CustomMetric> {
+    custom
+        .iter()
+        .map(|(k, v)| {
+            let m = match v {
+                Custom::Counter(c) => CustomMetric::Counter(*c),
+                Custom::Values(h) => CustomMetric::Values {
+                    count: h.len(),
+                    mean: h.mean(),
+                    p50: h.value_at_quantile(0.5),
+                    p99: h.value_at_quantile(0.99),
+                    max: h.max(),
+                },
+            };
+            (k.clone(), m)
+        })
+        .collect()
+}
+
+/// Metrics of one task.
+#[derive(Debug, Clone, Serialize)]
+pub struct TaskReport {
+    /// Task index.
+    pub task: usize,
+    /// Tuples executed (bolts).
+    pub received: u64,
+    /// Emit calls.
+    pub emitted: u64,
+    /// Tuples lost to drop policies at this task's inputs.
+    pub dropped: u64,
+    /// Tuples that reached this task after it exited (or at an abort).
+    pub undelivered: u64,
+    /// Execute latency.
+    pub execute: Latency,
+    /// Time spent in the component's code over wall time, percent.
+    pub busy_pct: f64,
+    /// Deepest input queue seen.
+    pub queue_depth_max: usize,
+    /// Restarts after panics.
+    pub restarts: u32,
+    /// Acked tuple trees (spouts with acking).
+    pub acked: u64,
+    /// Failed tuple trees.
+    pub failed: u64,
+    /// Replays.
+    pub replayed: u64,
+    /// Trees given up after the retry limit.
+    pub abandoned: u64,
+    /// The component's own metrics.
+    pub custom: BTreeMap<String, CustomMetric>,
+}
+
+/// Metrics of one component (sums over tasks; latency over all tuples).
+#[derive(Debug, Clone, Serialize)]
+pub struct ComponentReport {
+    /// Component name.
+    pub name: String,
+    /// Registry kind.
+    pub kind: String,
+    /// Spout or bolt.
+    pub role: Role,
+    /// Parallelism.
+    pub tasks: usize,
+    /// Tuples executed.
+    pub received: u64,
+    /// Emit calls.
+    pub emitted: u64,
+    /// Tuples lost to drop policies.
+    pub dropped: u64,
+    /// Tuples that could not be delivered.
+    pub undelivered: u64,
+    /// Execute latency over all tasks.
+    pub execute: Latency,
+    /// Mean busy percent over tasks.
+    pub busy_pct: f64,
+    /// Deepest input queue of any task.
+    pub queue_depth_max: usize,
+    /// Restarts after panics.
+    pub restarts: u32,
+    /// Acked trees.
+    pub acked: u64,
+    /// Failed trees.
+    pub failed: u64,
+    /// Replays.
+    pub replayed: u64,
+    /// Abandoned trees.
+    pub abandoned: u64,
+    /// Custom counters summed over tasks (value metrics per task only).
+    pub custom: BTreeMap<String, CustomMetric>,
+    /// Each task.
+    pub per_task: Vec<TaskReport>,
+}
+
+/// Everything measured in one run; `squall run` writes it as `metrics.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunReport {
+    /// Topology name.
+    pub topology: String,
+    /// Run seed.
+    pub seed: u64,
+    /// Wall time of the run.
+    pub wall_secs: f64,
+    /// Components in file order.
+    pub components: Vec<ComponentReport>,
+    /// Things the user should know (undelivered tuples, abandoned trees).
+    pub warnings: Vec<String>,
+}
+
+/// What the runtime collected for one task.
+#[derive(Debug)]
+pub(crate) struct TaskOutcome {
+    pub(crate) stats: TaskStats,
+    pub(crate) dropped: u64,
+    pub(crate) undelivered: u64,
+    pub(crate) queue_depth_max: usize,
+}
+
+pub(crate) fn task_report(task: usize, o: &TaskOutcome) -> TaskReport {
+    let s = &o.stats;
+    TaskReport {
+        task,
+        received: s.received,
+        emitted: s.emitted,
+        dropped: o.dropped,
+        undelivered: o.undelivered,
+        execute: Latency::of(&s.latency),
+        busy_pct: percent(s.busy, s.wall),
+        queue_depth_max: o.queue_depth_max,
+        restarts: s.restarts,
+        acked: s.acked,
+        failed: s.failed,
+        replayed: s.replayed,
+        abandoned: s.abandoned,
+        custom: summarize_custom(&s.custom),
+    }
+}
+
+fn percent(part: Duration, whole: Duration) -> f64 {
+    if whole.is_zero() { 0.0 } else { 100.0 * part.as_secs_f64() / whole.as_secs_f64() }
+}
+
+pub(crate) fn component_report(
+    name: &str,
+    kind: &str,
+    role: Role,
+    outcomes: &[TaskOutcome],
+) -> ComponentReport {
+    let mut latency = new_histogram();
+    let mut custom: BTreeMap<String, Custom> = BTreeMap::new();
+    for o in outcomes {
+        latency.add(&o.stats.latency).expect("same bounds");
+        for (k, v) in &o.stats.custom {
+            match (custom.get_mut(k), v) {
+                (Some(Custom::Counter(a)), Custom::Counter(b)) => *a += b,
+                (Some(Custom::Values(a)), Custom::Values(b)) => a.add(&**b).expect("same bounds"),
+                (None, v) => {
+                    custom.insert(k.clone(), v.clone());
+                }
+                _ => {}
+            }
+        }
+    }
+    let per_task: Vec<TaskReport> = outcomes.iter().enumerate().map(|(i, o)| task_report(i, o)).collect();
+    let sum = |f: fn(&TaskReport) -> u64| per_task.iter().map(f).sum::<u64>();
+    ComponentReport {
+        name: name.to_string(),
+        kind: kind.to_string(),
+        role,
+        tasks: outcomes.len(),
+        received: sum(|t| t.received),
+        emitted: sum(|t| t.emitted),
+        dropped: sum(|t| t.dropped),
+        undelivered: sum(|t| t.undelivered),
+        execute: Latency::of(&latency),
+        busy_pct: per_task.iter().map(|t| t.busy_pct).sum::<f64>() / per_task.len().max(1) as f64,
+        queue_depth_max: per_task.iter().map(|t| t.queue_depth_max).max().unwrap_or(0),
+        restarts: per_task.iter().map(|t| t.restarts).sum(),
+        acked: sum(|t| t.acked),
+        failed: sum(|t| t.failed),
+        replayed: sum(|t| t.replayed),
+        abandoned: sum(|t| t.abandoned),
+        custom: summarize_custom(&custom),
+        per_task,
+    }
+}
+
+impl RunReport {
+    /// The component called `name`.
+    pub fn component(&self, name: &str) -> Option<&ComponentReport> {
+        self.components.iter().find(|c| c.name == name)
+    }
+
+    /// The report as pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("reports serialize")
+    }
+}
+
+/// The per-component summary table printed at the end of a run.
+impl fmt::Display for RunReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "topology \"{}\" (seed {}) ran {:.3} s", self.topology, self.seed, self.wall_secs)?;
+        writeln!(
+            f,
+            "{:<18} {:>5} {:>12} {:>12} {:>9} {:>11} {:>11} {:>7}",
+            "component", "tasks", "received", "emitted", "dropped", "p50 exec", "p99 exec", "busy"
+        )?;
+        for c in &self.components {
+            let (p50, p99) = if c.role == Role::Bolt {
+                (format_us(c.execute.p50_us), format_us(c.execute.p99_us))
+            } else {
+                ("-".to_string(), "-".to_string())
+            };
+            writeln!(
+                f,
+                "{:<18} {:>5} {:>12} {:>12} {:>9} {:>11} {:>11} {:>6.1}%",
+                c.name, c.tasks, c.received, c.emitted, c.dropped, p50, p99, c.busy_pct
+            )?;
+        }
+        for w in &self.warnings {
+            writeln!(f, "warning: {w}")?;
+        }
+        Ok(())
+    }
+}
+
+fn format_us(us: f64) -> String {
+    if us >= 1e6 {
+        format!("{:.2} s", us / 1e6)
+    } else if us >= 1e3 {
+        format!("{:.2} ms", us / 1e3)
+    } else {
+        format!("{us:.1} µs")
+    }
+}

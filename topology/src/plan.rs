@@ -1,0 +1,245 @@
+//! Validation: a [`TopologySpec`] checked against a [`Registry`] becomes a
+//! runnable [`Topology`].
+//!
+//! Everything that can be known before running is checked here and reported
+//! together, each with file, line and component: unknown kinds, bad params,
+//! unknown components and streams, stream/input type mismatches, grouping
+//! fields missing from the stream's type, and cycles not marked `feedback`.
+
+use crate::declare::Declarer;
+use crate::grouping::Grouping;
+use crate::params::Params;
+use crate::registry::{BoltFactory, Registry, SpoutFactory};
+use crate::spec::{ComponentSpec, Role, SpecError, SpecErrors, TopologySpec};
+
+/// A validated topology, ready to run.
+#[derive(Debug, Clone)]
+pub struct Topology {
+    pub(crate) spec: TopologySpec,
+    pub(crate) components: Vec<Planned>,
+    /// Component indices in dependency order (feedback edges ignored).
+    pub(crate) order: Vec<usize>,
+}
+
+#[derive(Clone)]
+pub(crate) enum Factory {
+    Spout(SpoutFactory),
+    Bolt(BoltFactory),
+}
+
+impl std::fmt::Debug for Factory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Factory::Spout(_) => "SpoutFactory",
+            Factory::Bolt(_) => "BoltFactory",
+        })
+    }
+}
+
+/// One component with what it declared.
+#[derive(Debug, Clone)]
+pub(crate) struct Planned {
+    pub(crate) spec: ComponentSpec,
+    pub(crate) declared: Declarer,
+    pub(crate) factory: Factory,
+    pub(crate) params: Params,
+}
+
+impl Topology {
+    /// Checks `spec` against the kinds in `registry`.
+    pub fn validate(spec: TopologySpec, registry: &Registry) -> Result<Self, SpecErrors> {
+        let mut errors = Vec::new();
+        let mut components = Vec::new();
+        for c in &spec.components {
+            if let Some(p) = instantiate(&spec, c, registry, &mut errors) {
+                components.push(p);
+            }
+        }
+        if errors.is_empty() {
+            check_inputs(&spec, &components, &mut errors);
+        }
+        let order = if errors.is_empty() { order_or_cycle(&spec, &components, &mut errors) } else { vec![] };
+        if errors.is_empty() {
+            Ok(Topology { spec, components, order })
+        } else {
+            Err(SpecErrors(errors))
+        }
+    }
+
+    /// The topology's name.
+    pub fn name(&self) -> &str {
+        &self.spec.name
+    }
+
+    /// The run seed.
+    pub fn seed(&self) -> u64 {
+        self.spec.seed
+    }
+
+    /// The parsed specification.
+    pub fn spec(&self) -> &TopologySpec {
+        &self.spec
+    }
+
+    /// What the component called `name` declared.
+    pub fn declared(&self, name: &str) -> Option<&Declarer> {
+        self.components.iter().find(|c| c.spec.name == name).map(|c| &c.declared)
+    }
+}
+
+fn instantiate(
+    spec: &TopologySpec,
+    c: &ComponentSpec,
+    registry: &Registry,
+    errors: &mut Vec<SpecError>,
+) -> Option<Planned> {
+    let at = Some((c.role, c.name.as_str()));
+    let params = Params::new(c.params.clone(), spec.seed, c.parallelism);
+    let mut declared = Declarer::default();
+    let factory = match c.role {
+        Role::Spout => registry.spout(&c.kind).map(|f| Factory::Spout(f.clone())),
+        Role::Bolt => registry.bolt(&c.kind).map(|f| Factory::Bolt(f.clone())),
+    };
+    let Some(factory) = factory else {
+        let known: Vec<&str> = match c.role {
+            Role::Spout => registry.spout_kinds().collect(),
+            Role::Bolt => registry.bolt_kinds().collect(),
+        };
+        errors.push(spec.source.error_at_line(
+            c.line,
+            at,
+            format!("unknown {} kind \"{}\" (known: {})", c.role, c.kind, known.join(", ")),
+        ));
+        return None;
+    };
+    let built = match &factory {
+        Factory::Spout(f) => f(&params).map(|s| s.declare(&mut declared)),
+        Factory::Bolt(f) => f(&params).map(|b| b.declare(&mut declared)),
+    };
+    if let Err(e) = built {
+        errors.push(spec.source.error_at_line(c.params_line, at, format!("bad params for kind \"{}\": {e}", c.kind)));
+        return None;
+    }
+    if c.role == Role::Bolt && c.inputs.is_empty() {
+        errors.push(spec.source.error_at_line(c.line, at, "a bolt needs at least one entry in `inputs`"));
+    }
+    Some(Planned { spec: c.clone(), declared, factory, params })
+}
+
+fn check_inputs(spec: &TopologySpec, components: &[Planned], errors: &mut Vec<SpecError>) {
+    let names: Vec<&str> = components.iter().map(|c| c.spec.name.as_str()).collect();
+    for consumer in components {
+        let at = Some((consumer.spec.role, consumer.spec.name.as_str()));
+        for input in &consumer.spec.inputs {
+            let error = |message: String| spec.source.error_at_line(input.line, at, message);
+            let Some(producer) = components.iter().find(|p| p.spec.name == input.from) else {
+                errors.push(error(format!(
+                    "input from unknown component \"{}\" (components: {})",
+                    input.from,
+                    names.join(", ")
+                )));
+                continue;
+            };
+            let Some(stream) = producer.declared.stream(&input.stream) else {
+                let streams: Vec<&str> = producer.declared.outputs().iter().map(|s| s.name.as_str()).collect();
+                errors.push(error(format!(
+                    "{} \"{}\" has no stream \"{}\" (it declares: {})",
+                    producer.spec.role,
+                    producer.spec.name,
+                    input.stream,
+                    if streams.is_empty() { "none".to_string() } else { streams.join(", ") }
+                )));
+                continue;
+            };
+            if !consumer.declared.accepts().accepts(&stream.message) {
+                errors.push(error(format!(
+                    "stream type mismatch: {} \"{}\" stream \"{}\" carries {}, but {} \"{}\" accepts {}",
+                    producer.spec.role,
+                    producer.spec.name,
+                    stream.name,
+                    stream.message.name(),
+                    consumer.spec.role,
+                    consumer.spec.name,
+                    consumer.declared.accepts().describe()
+                )));
+            }
+            if let Grouping::Fields(fields) = &input.grouping {
+                for f in fields {
+                    if !stream.message.has_field(f) {
+                        let available = stream
+                            .message
+                            .fields()
+                            .map_or("it has no named fields".to_string(), |fs| format!("fields: {}", fs.join(", ")));
+                        errors.push(error(format!(
+                            "grouping field \"{f}\" is not a field of {} on stream \"{}\" ({available})",
+                            stream.message.name(),
+                            stream.name
+                        )));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Kahn's algorithm over non-feedback edges (stable in file order); on a
+/// cycle, reports it at the line of an edge that closes it.
+fn order_or_cycle(spec: &TopologySpec, components: &[Planned], errors: &mut Vec<SpecError>) -> Vec<usize> {
+    let n = components.len();
+    let index = |name: &str| components.iter().position(|c| c.spec.name == name).expect("checked");
+    let mut indegree = vec![0usize; n];
+    let mut downstream: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (to, c) in components.iter().enumerate() {
+        for input in c.spec.inputs.iter().filter(|i| !i.feedback) {
+            let from = index(&input.from);
+            downstream[from].push(to);
+            indegree[to] += 1;
+        }
+    }
+    let mut order = Vec::with_capacity(n);
+    let mut ready: Vec<usize> = (0..n).filter(|&i| indegree[i] == 0).collect();
+    while let Some(i) = ready.iter().copied().min() {
+        ready.retain(|&r| r != i);
+        order.push(i);
+        for &d in &downstream[i] {
+            indegree[d] -= 1;
+            if indegree[d] == 0 {
+                ready.push(d);
+            }
+        }
+    }
+    if order.len() == n {
+        return order;
+    }
+    // Some component is on a cycle: walk back through unresolved inputs.
+    let stuck: Vec<bool> = (0..n).map(|i| !order.contains(&i)).collect();
+    let start = stuck.iter().position(|&s| s).expect("a stuck component");
+    let mut path = vec![start];
+    let mut current = start;
+    loop {
+        let c = &components[current];
+        let input = c
+            .spec
+            .inputs
+            .iter()
+            .find(|i| !i.feedback && stuck[index(&i.from)])
+            .expect("a stuck component has a stuck input");
+        let prev = index(&input.from);
+        if let Some(pos) = path.iter().position(|&p| p == prev) {
+            let mut cycle: Vec<&str> =
+                path[pos..].iter().rev().map(|&i| components[i].spec.name.as_str()).collect();
+            cycle.push(cycle[0]);
+            errors.push(spec.source.error_at_line(
+                input.line,
+                Some((c.spec.role, c.spec.name.as_str())),
+                format!(
+                    "undeclared cycle {}: mark the edge that closes it with `feedback = true`",
+                    cycle.join(" -> ")
+                ),
+            ));
+            return order;
+        }
+        path.push(prev);
+        current = prev;
+    }
+}

@@ -1,0 +1,284 @@
+//! The handle through which a component emits, sends to peers, fails its
+//! input and records its own metrics.
+//!
+//! Routing happens here, on the emitting task's thread: the grouping picks
+//! the consumer task(s) and the tuple goes into that task's bounded queue.
+//! This is the transport boundary: a remote task would be another kind of
+//! target behind the same calls.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use crate::error::EmitError;
+use crate::message::{Message, MessageType, Payload};
+use crate::metrics::TaskStats;
+use crate::runtime::local::acker::{AckTracker, Anchor, Replay};
+use crate::runtime::local::queue::{EdgeQueue, Push};
+use crate::tuple::{Source, Tuple};
+
+/// How one subscription picks consumer tasks.
+#[derive(Debug, Clone)]
+pub(crate) enum Route {
+    RoundRobin,
+    Fields(Vec<&'static str>),
+    All,
+    Global,
+    Direct,
+}
+
+/// One subscriber of a stream: its tasks' queues for this edge.
+#[derive(Debug)]
+pub(crate) struct Subscription {
+    pub(crate) route: Route,
+    pub(crate) targets: Vec<Arc<EdgeQueue>>,
+    pub(crate) next: usize,
+}
+
+/// A declared output stream and its subscribers.
+#[derive(Debug)]
+pub(crate) struct StreamRoute {
+    pub(crate) name: Arc<str>,
+    pub(crate) message: MessageType,
+    pub(crate) source: Source,
+    pub(crate) subscriptions: Vec<Subscription>,
+}
+
+/// Queues of the sibling tasks for peer exchange.
+#[derive(Debug)]
+pub(crate) struct PeerRoute {
+    pub(crate) message: MessageType,
+    pub(crate) source: Source,
+    pub(crate) targets: Vec<Arc<EdgeQueue>>,
+}
+
+/// Root creation for a spout with acking.
+#[derive(Debug)]
+pub(crate) struct SpoutAcking {
+    pub(crate) tracker: Arc<AckTracker>,
+    pub(crate) timeout: Duration,
+}
+
+/// Emits tuples on a component's declared streams.
+#[derive(Debug)]
+pub struct Emitter {
+    pub(crate) streams: Vec<StreamRoute>,
+    pub(crate) peers: Option<PeerRoute>,
+    pub(crate) acking: Option<SpoutAcking>,
+    /// The anchor of the tuple being executed.
+    pub(crate) anchor: Option<Anchor>,
+    pub(crate) input_failed: bool,
+    pub(crate) stats: TaskStats,
+    pub(crate) aborting: Arc<AtomicBool>,
+    task: usize,
+}
+
+impl Emitter {
+    pub(crate) fn new(
+        task: usize,
+        streams: Vec<StreamRoute>,
+        peers: Option<PeerRoute>,
+        acking: Option<SpoutAcking>,
+        aborting: Arc<AtomicBool>,
+    ) -> Self {
+        Emitter {
+            streams,
+            peers,
+            acking,
+            anchor: None,
+            input_failed: false,
+            stats: TaskStats::default(),
+            aborting,
+            task,
+        }
+    }
+
+    /// Emits `value` on `stream`.
+    pub async fn emit<T: Message>(&mut self, stream: &str, value: T) -> Result<(), EmitError> {
+        let index = self.stream_index::<T>(stream)?;
+        self.emit_payload(index, Arc::new(value), None, None).await
+    }
+
+    /// Emits an already shared value (forwarding without a copy).
+    pub async fn emit_shared<T: Message>(&mut self, stream: &str, value: Arc<T>) -> Result<(), EmitError> {
+        let index = self.stream_index::<T>(stream)?;
+        self.emit_payload(index, value, None, None).await
+    }
+
+    /// Emits `value` on `stream`; `direct` subscribers receive it at `task`,
+    /// others by their own grouping.
+    pub async fn emit_direct<T: Message>(
+        &mut self,
+        stream: &str,
+        task: usize,
+        value: T,
+    ) -> Result<(), EmitError> {
+        let index = self.stream_index::<T>(stream)?;
+        self.emit_payload(index, Arc::new(value), Some(task), None).await
+    }
+
+    /// Sends `value` to sibling task `task` of this component (peer
+    /// exchange; the type is the one declared with `Declarer::peer`).
+    pub async fn send_peer<T: Message>(&mut self, task: usize, value: T) -> Result<(), EmitError> {
+        let peers = self.peers.as_ref().ok_or(EmitError::NoPeerStream)?;
+        if !peers.message.is::<T>() {
+            return Err(EmitError::WrongType {
+                stream: "<peer>".to_string(),
+                expected: peers.message.name(),
+                actual: std::any::type_name::<T>(),
+            });
+        }
+        let count = peers.targets.len();
+        let queue = peers.targets.get(task).ok_or(EmitError::NoSuchTask { task, count })?.clone();
+        let source = peers.source.clone();
+        let payload: Payload = Arc::new(value);
+        let anchor = self.anchor.as_ref().map(Anchor::child);
+        self.stats.emitted += 1;
+        self.deliver(&queue, Tuple { source, payload, anchor }).await
+    }
+
+    /// Marks the tuple being executed as failed: its spout (if it acks)
+    /// replays it.
+    pub fn fail(&mut self) {
+        self.input_failed = true;
+    }
+
+    /// Adds `delta` to the component's counter `name` (reported in
+    /// metrics.json).
+    pub fn count(&mut self, name: &str, delta: u64) {
+        self.stats.count(name, delta);
+    }
+
+    /// Records `value` in the component's value metric `name` (reported as
+    /// count, mean, p50, p99, max).
+    pub fn record(&mut self, name: &str, value: u64) {
+        self.stats.record(name, value);
+    }
+
+    /// This task's index.
+    pub fn task_index(&self) -> usize {
+        self.task
+    }
+
+    /// Emit calls so far.
+    pub fn emitted(&self) -> u64 {
+        self.stats.emitted
+    }
+
+    fn stream_index<T: 'static>(&self, stream: &str) -> Result<usize, EmitError> {
+        let index = self
+            .streams
+            .iter()
+            .position(|s| &*s.name == stream)
+            .ok_or_else(|| EmitError::UnknownStream(stream.to_string()))?;
+        let declared = self.streams[index].message;
+        if declared.is::<T>() {
+            Ok(index)
+        } else {
+            Err(EmitError::WrongType {
+                stream: stream.to_string(),
+                expected: declared.name(),
+                actual: std::any::type_name::<T>(),
+            })
+        }
+    }
+
+    /// Routes one payload to every subscriber of stream `index`. A spout
+    /// with acking makes it a root (`replay` gives the id and attempt).
+    pub(crate) async fn emit_payload(
+        &mut self,
+        index: usize,
+        payload: Payload,
+        direct: Option<usize>,
+        replay: Option<(u64, u32)>,
+    ) -> Result<(), EmitError> {
+        let root = self.acking.as_ref().map(|a| {
+            let (seq, attempt) = replay.unwrap_or((self.stats.emitted, 0));
+            a.tracker.begin(seq, attempt, index, payload.clone(), Instant::now() + a.timeout)
+        });
+        if replay.is_none() {
+            self.stats.emitted += 1;
+        }
+        let result = self.route(index, &payload, direct, root.as_ref()).await;
+        if let Some(root) = root {
+            match result {
+                Ok(()) => root.complete(),
+                Err(_) => root.fail(),
+            }
+        }
+        result
+    }
+
+    async fn route(
+        &mut self,
+        index: usize,
+        payload: &Payload,
+        direct: Option<usize>,
+        root: Option<&Anchor>,
+    ) -> Result<(), EmitError> {
+        let stream = &mut self.streams[index];
+        let parent = root.or(self.anchor.as_ref());
+        if direct.is_none() && stream.subscriptions.iter().any(|s| matches!(s.route, Route::Direct)) {
+            return Err(EmitError::DirectNeedsTask(stream.name.to_string()));
+        }
+        for sub in &mut stream.subscriptions {
+            let n = sub.targets.len();
+            let targets = match &sub.route {
+                Route::RoundRobin => {
+                    let i = sub.next;
+                    sub.next = (i + 1) % n;
+                    i..i + 1
+                }
+                Route::Fields(fields) => {
+                    let i = (stream.message.hash_fields(&**payload, fields)? % n as u64) as usize;
+                    i..i + 1
+                }
+                Route::Global => 0..1,
+                Route::Direct => {
+                    let task = direct.expect("checked above");
+                    if task >= n {
+                        return Err(EmitError::NoSuchTask { task, count: n });
+                    }
+                    task..task + 1
+                }
+                Route::All => 0..n,
+            };
+            for i in targets {
+                let tuple = Tuple {
+                    source: stream.source.clone(),
+                    payload: payload.clone(),
+                    anchor: parent.map(Anchor::child),
+                };
+                deliver(&sub.targets[i], tuple, &self.aborting).await?;
+            }
+        }
+        Ok(())
+    }
+
+    async fn deliver(&mut self, queue: &EdgeQueue, tuple: Tuple) -> Result<(), EmitError> {
+        deliver(queue, tuple, &self.aborting).await
+    }
+
+    /// Replays a failed root.
+    pub(crate) async fn replay(&mut self, r: Replay) -> Result<(), EmitError> {
+        self.emit_payload(r.stream, r.payload, None, Some((r.seq, r.attempt + 1))).await
+    }
+}
+
+async fn deliver(queue: &EdgeQueue, tuple: Tuple, aborting: &AtomicBool) -> Result<(), EmitError> {
+    match queue.push(tuple).await {
+        Push::Queued => Ok(()),
+        Push::Dropped(victim) => {
+            if let Some(a) = victim.anchor {
+                a.fail();
+            }
+            Ok(())
+        }
+        Push::Closed(refused) => {
+            if let Some(a) = refused.anchor {
+                a.fail();
+            }
+            if aborting.load(Ordering::Relaxed) { Err(EmitError::ShuttingDown) } else { Ok(()) }
+        }
+    }
+}

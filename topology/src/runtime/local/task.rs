@@ -1,0 +1,405 @@
+//! The loop of one task, on its own thread.
+//!
+//! A bolt task takes a batch from one of its input queues (round-robin over
+//! its inputs), executes it, gives the room back, and sleeps when every queue
+//! is empty. A spout task calls `next` until the source is exhausted, settling
+//! acks and replaying failures in between. Both obey the coordinator's stage
+//! (finish, exit, abort). A panic or error is caught here: the task restarts
+//! with a fresh instance if its policy allows, else the run fails.
+
+use std::collections::VecDeque;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::Sender;
+use std::time::{Duration, Instant};
+
+use tokio::runtime::Handle;
+use tracing::warn;
+
+use crate::component::{Bolt, MessageId, Spout, SpoutStatus};
+use crate::context::TaskContext;
+use crate::error::BoxError;
+use crate::metrics::TaskOutcome;
+use crate::params::Params;
+use crate::registry::{BoltFactory, SpoutFactory};
+use crate::runtime::local::Progress;
+use crate::runtime::local::acker::{AckTracker, Outcome, Replay};
+use crate::runtime::local::control::{Control, Event, EventKind, Stage};
+use crate::runtime::local::emitter::Emitter;
+use crate::runtime::local::queue::EdgeQueue;
+use crate::spec::AckPolicy;
+use crate::tuple::Tuple;
+
+/// Most tuples taken from a queue at once.
+const MAX_BATCH: usize = 64;
+/// How often a waiting spout checks for timed-out tuple trees.
+const ACK_POLL: Duration = Duration::from_millis(20);
+
+/// What every task has.
+#[derive(Debug)]
+pub(crate) struct TaskCommon {
+    pub(crate) ctx: TaskContext,
+    pub(crate) component: usize,
+    pub(crate) control: Arc<Control>,
+    pub(crate) emitter: Emitter,
+    pub(crate) events: Sender<Event>,
+    pub(crate) finished: bool,
+}
+
+impl TaskCommon {
+    fn report(&self, kind: EventKind) {
+        // The coordinator outlives every task; a closed channel means it is
+        // gone and there is nobody left to tell.
+        let _ = self.events.send(Event { component: self.component, task: self.ctx.task_index, kind });
+    }
+}
+
+/// A bolt task's state, kept across restarts.
+#[derive(Debug)]
+pub(crate) struct BoltTask {
+    pub(crate) common: TaskCommon,
+    pub(crate) inbox: Vec<Arc<EdgeQueue>>,
+    pub(crate) tick: Option<Duration>,
+    batch: VecDeque<Tuple>,
+    batch_from: usize,
+    batch_taken: usize,
+    next_queue: usize,
+}
+
+impl BoltTask {
+    pub(crate) fn new(common: TaskCommon, inbox: Vec<Arc<EdgeQueue>>, tick: Option<Duration>) -> Self {
+        BoltTask {
+            common,
+            inbox,
+            tick,
+            batch: VecDeque::with_capacity(MAX_BATCH),
+            batch_from: 0,
+            batch_taken: 0,
+            next_queue: 0,
+        }
+    }
+
+    fn take_batch(&mut self) -> bool {
+        let n = self.inbox.len();
+        for k in 0..n {
+            let q = (self.next_queue + k) % n;
+            let taken = self.inbox[q].take(&mut self.batch, MAX_BATCH);
+            if taken > 0 {
+                self.batch_from = q;
+                self.batch_taken = taken;
+                self.next_queue = (q + 1) % n;
+                return true;
+            }
+        }
+        false
+    }
+
+    fn release_batch(&mut self) {
+        if self.batch_taken > 0 {
+            self.inbox[self.batch_from].release(self.batch_taken);
+            self.batch_taken = 0;
+        }
+    }
+
+    async fn execute<B: Bolt>(&mut self, bolt: &mut B, mut tuple: Tuple) -> Result<(), BoxError> {
+        let out = &mut self.common.emitter;
+        out.anchor = tuple.anchor.take();
+        out.input_failed = false;
+        let start = Instant::now();
+        let result = bolt.execute(tuple, out).await;
+        let elapsed = start.elapsed();
+        let stats = &mut out.stats;
+        stats.received += 1;
+        stats.busy += elapsed;
+        stats.latency.saturating_record((elapsed.as_nanos() as u64).max(1));
+        if let Some(anchor) = out.anchor.take() {
+            if out.input_failed || result.is_err() { anchor.fail() } else { anchor.complete() }
+        }
+        result
+    }
+}
+
+/// Runs a bolt task until it is told to exit or abort.
+pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<(), BoxError> {
+    bolt.prepare(&t.common.ctx).await?;
+    let mut next_tick = t.tick.map(|p| Instant::now() + p);
+    loop {
+        while let Some(tuple) = t.batch.pop_front() {
+            t.execute(bolt, tuple).await?;
+        }
+        t.release_batch();
+        let stage = t.common.control.stage();
+        if stage >= Stage::Abort {
+            return Ok(());
+        }
+        if stage >= Stage::Finish && !t.common.finished {
+            bolt.finish(&mut t.common.emitter).await?;
+            t.common.finished = true;
+            t.common.report(EventKind::Finished);
+        }
+        if stage >= Stage::Exit {
+            return Ok(());
+        }
+        if let (Some(due), Some(period)) = (next_tick, t.tick) {
+            if Instant::now() >= due {
+                next_tick = Some(Instant::now() + period);
+                let control = t.common.control.clone();
+                control.ticking.store(true, Ordering::SeqCst);
+                if control.stage() < Stage::Drain {
+                    let start = Instant::now();
+                    let result = bolt.tick(&mut t.common.emitter).await;
+                    t.common.emitter.stats.busy += start.elapsed();
+                    control.ticking.store(false, Ordering::SeqCst);
+                    result?;
+                } else {
+                    control.ticking.store(false, Ordering::SeqCst);
+                }
+                continue;
+            }
+        }
+        if t.take_batch() {
+            continue;
+        }
+        let signal = t.common.control.signal.clone();
+        match next_tick.filter(|_| stage < Stage::Drain) {
+            Some(due) => {
+                tokio::select! {
+                    () = signal.notified() => {}
+                    () = tokio::time::sleep_until(due.into()) => {}
+                }
+            }
+            None => signal.notified().await,
+        }
+    }
+}
+
+/// A spout task's state, kept across restarts.
+#[derive(Debug)]
+pub(crate) struct SpoutTask {
+    pub(crate) common: TaskCommon,
+    pub(crate) acking: Option<(Arc<AckTracker>, AckPolicy)>,
+    pub(crate) progress: Option<Arc<Progress>>,
+    exhausted: bool,
+    reported_done: bool,
+    settled: Vec<(u64, Outcome, Option<Replay>)>,
+    last_expiry: Instant,
+}
+
+impl SpoutTask {
+    pub(crate) fn new(
+        common: TaskCommon,
+        acking: Option<(Arc<AckTracker>, AckPolicy)>,
+        progress: Option<Arc<Progress>>,
+    ) -> Self {
+        SpoutTask {
+            common,
+            acking,
+            progress,
+            exhausted: false,
+            reported_done: false,
+            settled: Vec::new(),
+            last_expiry: Instant::now(),
+        }
+    }
+
+    /// Acks, fails and replays what settled; returns the roots still open.
+    async fn settle<S: Spout>(&mut self, spout: &mut S) -> Result<usize, BoxError> {
+        let Some((tracker, policy)) = self.acking.clone() else { return Ok(0) };
+        let now = Instant::now();
+        if now.duration_since(self.last_expiry) >= ACK_POLL {
+            tracker.expire(now);
+            self.last_expiry = now;
+        }
+        tracker.take_finished(&mut self.settled);
+        for (seq, outcome, replay) in std::mem::take(&mut self.settled) {
+            let stats = &mut self.common.emitter.stats;
+            match outcome {
+                Outcome::Acked => {
+                    stats.acked += 1;
+                    spout.ack(MessageId(seq));
+                }
+                Outcome::Failed => {
+                    stats.failed += 1;
+                    spout.fail(MessageId(seq));
+                    match replay {
+                        Some(r) if r.attempt < policy.max_retries => {
+                            self.common.emitter.stats.replayed += 1;
+                            self.common.emitter.replay(r).await?;
+                        }
+                        _ => stats.abandoned += 1,
+                    }
+                }
+            }
+        }
+        Ok(tracker.pending())
+    }
+}
+
+/// Runs a spout task until it is told to exit or abort.
+pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Result<(), BoxError> {
+    spout.open(&t.common.ctx).await?;
+    loop {
+        let stage = t.common.control.stage();
+        if stage >= Stage::Abort {
+            return Ok(());
+        }
+        if stage >= Stage::Finish && !t.common.finished {
+            spout.close().await?;
+            t.common.finished = true;
+            t.common.report(EventKind::Finished);
+        }
+        if stage >= Stage::Exit {
+            return Ok(());
+        }
+        let pending = t.settle(spout).await?;
+        let max_pending = t.acking.as_ref().map_or(usize::MAX, |(_, p)| p.max_pending);
+        let signal = t.common.control.signal.clone();
+        if !t.exhausted && pending < max_pending {
+            let before = t.common.emitter.stats.emitted;
+            let start = Instant::now();
+            let status = spout.next(&mut t.common.emitter).await?;
+            t.common.emitter.stats.busy += start.elapsed();
+            let emitted = t.common.emitter.stats.emitted - before;
+            if let Some(p) = &t.progress {
+                p.emitted.fetch_add(emitted, Ordering::Relaxed);
+            }
+            if status == SpoutStatus::Done {
+                t.exhausted = true;
+            } else if emitted == 0 {
+                tokio::task::yield_now().await;
+            }
+        } else if t.exhausted && pending == 0 && !t.reported_done {
+            t.reported_done = true;
+            t.common.report(EventKind::SpoutDone);
+        } else if pending > 0 {
+            let _ = tokio::time::timeout(ACK_POLL, signal.notified()).await;
+        } else {
+            signal.notified().await;
+        }
+    }
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic with a non-string payload".to_string())
+}
+
+/// Access to the state every task kind has.
+pub(crate) trait HasCommon {
+    fn common(&mut self) -> &mut TaskCommon;
+}
+
+impl HasCommon for BoltTask {
+    fn common(&mut self) -> &mut TaskCommon {
+        &mut self.common
+    }
+}
+
+impl HasCommon for SpoutTask {
+    fn common(&mut self) -> &mut TaskCommon {
+        &mut self.common
+    }
+}
+
+/// Runs one incarnation after another until the task ends, restarting after
+/// a panic or error while the policy allows. Returns the final failure.
+fn supervise<T: HasCommon>(
+    task: &mut T,
+    max_restarts: u32,
+    mut run_once: impl FnMut(&mut T) -> Result<Result<(), BoxError>, String>,
+) -> Option<String> {
+    loop {
+        let failure = match run_once(task) {
+            Ok(Ok(())) => return None,
+            Ok(Err(e)) => format!("failed: {e}"),
+            Err(panic) => format!("panicked: {panic}"),
+        };
+        let common = task.common();
+        if common.control.stage() >= Stage::Abort {
+            return None;
+        }
+        if let Some(anchor) = common.emitter.anchor.take() {
+            anchor.fail();
+        }
+        if common.emitter.stats.restarts >= max_restarts {
+            return Some(failure);
+        }
+        common.emitter.stats.restarts += 1;
+        warn!(
+            component = common.ctx.component(),
+            task = common.ctx.task_index(),
+            restart = common.emitter.stats.restarts,
+            "task {failure}; restarting it"
+        );
+    }
+}
+
+/// The body of a bolt task's thread.
+pub(crate) fn bolt_thread(
+    factory: BoltFactory,
+    params: Params,
+    mut task: BoltTask,
+    runtime: Handle,
+    max_restarts: u32,
+) -> TaskOutcome {
+    let started = Instant::now();
+    let failure = supervise(&mut task, max_restarts, |task| match factory(&params) {
+        Ok(mut bolt) => {
+            catch_unwind(AssertUnwindSafe(|| bolt.run(task, &runtime))).map_err(|p| panic_message(&*p))
+        }
+        Err(e) => Ok(Err(format!("could not be created: {e}").into())),
+    });
+    // Whatever is still queued can no longer be executed.
+    task.release_batch();
+    for q in &task.inbox {
+        for t in q.close() {
+            if let Some(a) = t.anchor {
+                a.fail();
+            }
+        }
+    }
+    finish_thread(&mut task.common, failure, started, &task.inbox)
+}
+
+/// The body of a spout task's thread.
+pub(crate) fn spout_thread(
+    factory: SpoutFactory,
+    params: Params,
+    mut task: SpoutTask,
+    runtime: Handle,
+    max_restarts: u32,
+) -> TaskOutcome {
+    let started = Instant::now();
+    let failure = supervise(&mut task, max_restarts, |task| match factory(&params) {
+        Ok(mut spout) => {
+            catch_unwind(AssertUnwindSafe(|| spout.run(task, &runtime))).map_err(|p| panic_message(&*p))
+        }
+        Err(e) => Ok(Err(format!("could not be created: {e}").into())),
+    });
+    finish_thread(&mut task.common, failure, started, &[])
+}
+
+fn finish_thread(
+    common: &mut TaskCommon,
+    failure: Option<String>,
+    started: Instant,
+    inbox: &[Arc<EdgeQueue>],
+) -> TaskOutcome {
+    if let Some(message) = failure {
+        common.report(EventKind::Failed(message));
+    }
+    common.emitter.stats.wall = started.elapsed();
+    let sum = |f: fn(&EdgeQueue) -> u64| inbox.iter().map(|q| f(q)).sum::<u64>();
+    let outcome = TaskOutcome {
+        stats: std::mem::take(&mut common.emitter.stats),
+        dropped: sum(|q| q.counters.dropped.load(Ordering::Relaxed)),
+        undelivered: sum(|q| q.counters.undelivered.load(Ordering::Relaxed)),
+        queue_depth_max: inbox.iter().map(|q| q.max_depth()).max().unwrap_or(0),
+    };
+    common.report(EventKind::Exited);
+    outcome
+}

@@ -1,0 +1,446 @@
+//! Topology files: parsing, structural checks and `--set` overrides.
+//!
+//! The key names here are the file-format contract (see DESIGN.md). Unknown
+//! keys are rejected; every problem is reported with its file and line. Checks
+//! that need the components themselves (kinds, streams, types) happen in
+//! [`crate::plan`].
+
+mod error;
+mod overrides;
+mod raw;
+
+use std::path::Path;
+use std::time::Duration;
+
+use toml::Spanned;
+
+pub use error::{Role, SpecError, SpecErrors};
+pub(crate) use error::SourceText;
+pub use overrides::Override;
+
+use crate::declare::DEFAULT_STREAM;
+use crate::grouping::{Grouping, OverflowPolicy};
+use raw::{RawComponent, RawFile, RawInput};
+
+/// Default bound of an input queue, in tuples.
+pub const DEFAULT_QUEUE: usize = 1024;
+/// Default acking timeout.
+pub const DEFAULT_ACK_TIMEOUT: Duration = Duration::from_secs(30);
+/// Default cap on a spout's un-acked tuples.
+pub const DEFAULT_MAX_PENDING: usize = 1024;
+/// Default replays of one failed tuple before it is abandoned (and counted).
+pub const DEFAULT_MAX_RETRIES: u32 = 3;
+
+/// A parsed, structurally valid topology.
+#[derive(Debug, Clone)]
+pub struct TopologySpec {
+    /// `[topology] name`.
+    pub name: String,
+    /// `[topology] seed` (default 0).
+    pub seed: u64,
+    /// Spouts then bolts, in file order.
+    pub components: Vec<ComponentSpec>,
+    pub(crate) source: SourceText,
+}
+
+/// One `[[spout]]` or `[[bolt]]`.
+#[derive(Debug, Clone)]
+pub struct ComponentSpec {
+    /// Unique name.
+    pub name: String,
+    /// Registry kind.
+    pub kind: String,
+    /// Spout or bolt.
+    pub role: Role,
+    /// Tasks (default 1).
+    pub parallelism: usize,
+    /// The component's own parameters.
+    pub params: toml::Table,
+    /// Subscriptions (bolts only).
+    pub inputs: Vec<InputSpec>,
+    /// `tick_secs`: overrides the component's declared tick.
+    pub tick: Option<Duration>,
+    /// Restarts allowed after a panic (default 0: a panic fails the run).
+    pub max_restarts: u32,
+    /// Acking (spouts only; off by default).
+    pub ack: Option<AckPolicy>,
+    /// Bound of the peer-exchange queue of each task.
+    pub peer_queue: usize,
+    pub(crate) line: usize,
+    pub(crate) params_line: usize,
+}
+
+/// One entry of a bolt's `inputs`.
+#[derive(Debug, Clone)]
+pub struct InputSpec {
+    /// Producing component.
+    pub from: String,
+    /// Stream name (default `"default"`).
+    pub stream: String,
+    /// Grouping (default shuffle).
+    pub grouping: Grouping,
+    /// Queue bound per consumer task (default 1024).
+    pub queue: usize,
+    /// Full-queue policy (default block).
+    pub policy: OverflowPolicy,
+    /// Whether this edge closes a cycle on purpose.
+    pub feedback: bool,
+    pub(crate) line: usize,
+}
+
+/// At-least-once settings of a spout.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AckPolicy {
+    /// A tuple tree not completed within this is failed and replayed.
+    pub timeout: Duration,
+    /// The spout is not polled while this many tuples are un-acked.
+    pub max_pending: usize,
+    /// Replays of one tuple before it is abandoned.
+    pub max_retries: u32,
+}
+
+impl ComponentSpec {
+    /// The 1-based line of the component in its file.
+    pub fn line(&self) -> usize {
+        self.line
+    }
+}
+
+impl InputSpec {
+    /// The 1-based line of the subscription in its file.
+    pub fn line(&self) -> usize {
+        self.line
+    }
+}
+
+impl TopologySpec {
+    /// Reads and parses a topology file, applying `overrides` first.
+    pub fn load(path: &Path, overrides: &[Override]) -> Result<Self, SpecErrors> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| SpecError {
+            file: file.as_str().into(),
+            line: 0,
+            component: None,
+            message: format!("cannot read the topology file: {e}"),
+        })?;
+        Self::parse_with(&file, &text, overrides)
+    }
+
+    /// Parses topology text; `file` names it in errors.
+    pub fn parse(file: &str, text: &str) -> Result<Self, SpecErrors> {
+        Self::parse_with(file, text, &[])
+    }
+
+    /// Parses topology text after applying `overrides`.
+    pub fn parse_with(file: &str, text: &str, overrides: &[Override]) -> Result<Self, SpecErrors> {
+        let source = SourceText::new(file, text);
+        let edited;
+        let text = if overrides.is_empty() {
+            text
+        } else {
+            edited = overrides::apply(text, overrides).map_err(|message| SpecError {
+                file: file.into(),
+                line: 0,
+                component: None,
+                message,
+            })?;
+            edited.as_str()
+        };
+        let raw: RawFile = toml::from_str(text).map_err(|e| {
+            let line = e.span().map_or(0, |s| source.line(s.start));
+            source.error_at_line(line, None, e.message().trim().to_string())
+        })?;
+        convert(raw, source)
+    }
+
+    /// The component called `name`.
+    pub fn component(&self, name: &str) -> Option<&ComponentSpec> {
+        self.components.iter().find(|c| c.name == name)
+    }
+
+    /// The file the topology came from, as given.
+    pub fn file(&self) -> &str {
+        &self.source.file
+    }
+}
+
+fn convert(raw: RawFile, source: SourceText) -> Result<TopologySpec, SpecErrors> {
+    let mut errors = Vec::new();
+    let topology = raw.topology.into_inner();
+    let seed = match topology.seed {
+        None => 0,
+        Some(s) if *s.get_ref() >= 0 => *s.get_ref() as u64,
+        Some(s) => {
+            errors.push(source.error(s.span().start, None, "seed must be a non-negative integer"));
+            0
+        }
+    };
+    let name = topology.name.into_inner();
+    if raw.spout.is_empty() {
+        errors.push(source.error_at_line(1, None, "a topology needs at least one [[spout]]"));
+    }
+    let mut components = Vec::new();
+    let all = raw
+        .spout
+        .into_iter()
+        .map(|c| (Role::Spout, c))
+        .chain(raw.bolt.into_iter().map(|c| (Role::Bolt, c)));
+    for (role, comp) in all {
+        let line = source.line(comp.span().start);
+        let comp = comp.into_inner();
+        let cname = comp.name.get_ref().clone();
+        if let Some(first) = components.iter().find(|c: &&ComponentSpec| c.name == cname) {
+            errors.push(source.error(
+                comp.name.span().start,
+                Some((role, &cname)),
+                format!("duplicate component name (first defined at line {})", first.line),
+            ));
+            continue;
+        }
+        if let Some(c) = convert_component(role, comp, line, &source, &mut errors) {
+            components.push(c);
+        }
+    }
+    if errors.is_empty() {
+        Ok(TopologySpec { name, seed, components, source })
+    } else {
+        Err(SpecErrors(errors))
+    }
+}
+
+fn positive(
+    value: &Spanned<i64>,
+    what: &str,
+    at: Option<(Role, &str)>,
+    source: &SourceText,
+    errors: &mut Vec<SpecError>,
+) -> Option<usize> {
+    let v = *value.get_ref();
+    if v >= 1 {
+        Some(v as usize)
+    } else {
+        errors.push(source.error(value.span().start, at, format!("{what} must be at least 1, got {v}")));
+        None
+    }
+}
+
+fn convert_component(
+    role: Role,
+    comp: RawComponent,
+    line: usize,
+    source: &SourceText,
+    errors: &mut Vec<SpecError>,
+) -> Option<ComponentSpec> {
+    let name = comp.name.into_inner();
+    let at = Some((role, name.as_str()));
+    let before = errors.len();
+    let parallelism = match &comp.parallelism {
+        None => 1,
+        Some(p) => positive(p, "parallelism", at, source, errors).unwrap_or(1),
+    };
+    let peer_queue = match &comp.peer_queue {
+        None => DEFAULT_QUEUE,
+        Some(q) => positive(q, "peer_queue", at, source, errors).unwrap_or(1),
+    };
+    let tick = comp.tick_secs.as_ref().and_then(|t| {
+        let secs = *t.get_ref();
+        if secs.is_finite() && secs > 0.0 {
+            Some(Duration::from_secs_f64(secs))
+        } else {
+            errors.push(source.error(t.span().start, at, format!("tick_secs must be > 0, got {secs}")));
+            None
+        }
+    });
+    let max_restarts = match &comp.restart {
+        None => 0,
+        Some(r) if r.get_ref().max_restarts >= 0 => r.get_ref().max_restarts as u32,
+        Some(r) => {
+            errors.push(source.error(r.span().start, at, "restart.max_restarts must be >= 0"));
+            0
+        }
+    };
+    let ack = comp.ack.as_ref().and_then(|a| {
+        if role == Role::Bolt {
+            errors.push(source.error(
+                a.span().start,
+                at,
+                "ack is a spout setting (bolts ack automatically)",
+            ));
+            return None;
+        }
+        let r = a.get_ref();
+        let timeout = r.timeout_secs.map_or(Some(DEFAULT_ACK_TIMEOUT), |s| {
+            (s.is_finite() && s > 0.0).then(|| Duration::from_secs_f64(s))
+        });
+        let max_pending = r.max_pending.map_or(Some(DEFAULT_MAX_PENDING), |p| (p >= 1).then_some(p as usize));
+        let max_retries = r.max_retries.map_or(Some(DEFAULT_MAX_RETRIES), |p| u32::try_from(p).ok());
+        match (timeout, max_pending, max_retries) {
+            (Some(timeout), Some(max_pending), Some(max_retries)) => {
+                Some(AckPolicy { timeout, max_pending, max_retries })
+            }
+            _ => {
+                errors.push(source.error(
+                    a.span().start,
+                    at,
+                    "ack expects timeout_secs > 0, max_pending >= 1, max_retries >= 0",
+                ));
+                None
+            }
+        }
+    });
+    let params_line = comp.params.as_ref().map_or(line, |p| source.line(p.span().start));
+    let params = comp.params.map(Spanned::into_inner).unwrap_or_default();
+    let mut inputs = Vec::new();
+    if let Some(raw_inputs) = comp.inputs {
+        if role == Role::Spout {
+            errors.push(source.error(raw_inputs.span().start, at, "a spout cannot have inputs"));
+        } else {
+            for input in raw_inputs.into_inner() {
+                let line = source.line(input.span().start);
+                if let Some(i) = convert_input(input.into_inner(), line, at, source, errors) {
+                    inputs.push(i);
+                }
+            }
+        }
+    }
+    (errors.len() == before).then(|| ComponentSpec {
+        name: name.clone(),
+        kind: comp.kind.into_inner(),
+        role,
+        parallelism,
+        params,
+        inputs,
+        tick,
+        max_restarts,
+        ack,
+        peer_queue,
+        line,
+        params_line,
+    })
+}
+
+fn convert_input(
+    input: RawInput,
+    line: usize,
+    at: Option<(Role, &str)>,
+    source: &SourceText,
+    errors: &mut Vec<SpecError>,
+) -> Option<InputSpec> {
+    let before = errors.len();
+    let grouping_name = input.grouping.as_ref().map_or("shuffle", |g| g.get_ref().as_str());
+    let grouping_at = input.grouping.as_ref().map_or(line, |g| source.line(g.span().start));
+    let grouping = match (grouping_name, &input.fields) {
+        ("fields", Some(fields)) if !fields.get_ref().is_empty() => Grouping::Fields(fields.get_ref().clone()),
+        ("fields", _) => {
+            errors.push(source.error_at_line(
+                grouping_at,
+                at,
+                "grouping \"fields\" needs a non-empty `fields = [...]` list",
+            ));
+            Grouping::Shuffle
+        }
+        (other, Some(fields)) => {
+            errors.push(source.error(
+                fields.span().start,
+                at,
+                format!("`fields` is only valid with grouping \"fields\", not \"{other}\""),
+            ));
+            Grouping::Shuffle
+        }
+        ("shuffle", None) => Grouping::Shuffle,
+        ("all", None) => Grouping::All,
+        ("global", None) => Grouping::Global,
+        ("direct", None) => Grouping::Direct,
+        ("local_or_shuffle", None) => Grouping::LocalOrShuffle,
+        (other, None) => {
+            errors.push(source.error_at_line(
+                grouping_at,
+                at,
+                format!(
+                    "unknown grouping \"{other}\" (expected one of {})",
+                    Grouping::NAMES.join(", ")
+                ),
+            ));
+            Grouping::Shuffle
+        }
+    };
+    let policy = match &input.policy {
+        None => OverflowPolicy::Block,
+        Some(p) => OverflowPolicy::from_name(p.get_ref()).unwrap_or_else(|| {
+            errors.push(source.error(
+                p.span().start,
+                at,
+                format!(
+                    "unknown queue policy \"{}\" (expected one of {})",
+                    p.get_ref(),
+                    OverflowPolicy::NAMES.join(", ")
+                ),
+            ));
+            OverflowPolicy::Block
+        }),
+    };
+    let queue = match &input.queue {
+        None => DEFAULT_QUEUE,
+        Some(q) => positive(q, "queue", at, source, errors).unwrap_or(1),
+    };
+    (errors.len() == before).then(|| InputSpec {
+        from: input.from.into_inner(),
+        stream: input.stream.map_or_else(|| DEFAULT_STREAM.to_string(), Spanned::into_inner),
+        grouping,
+        queue,
+        policy,
+        feedback: input.feedback,
+        line,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[topology]
+name = "t"
+seed = 7
+
+[[spout]]
+name = "src"
+kind = "k.src"
+params = { count = 10 }
+
+[[bolt]]
+name = "b"
+kind = "k.bolt"
+parallelism = 3
+inputs = [ { from = "src", grouping = "fields", fields = ["key"], queue = 8, policy = "drop_oldest" } ]
+"#;
+
+    #[test]
+    fn parses_the_contract_keys() {
+        let t = TopologySpec::parse("t.toml", GOOD).unwrap();
+        assert_eq!(t.name, "t");
+        assert_eq!(t.seed, 7);
+        let b = t.component("b").unwrap();
+        assert_eq!(b.parallelism, 3);
+        assert_eq!(b.line, 11);
+        let i = &b.inputs[0];
+        assert_eq!(i.grouping, Grouping::Fields(vec!["key".into()]));
+        assert_eq!((i.queue, i.policy, i.stream.as_str()), (8, OverflowPolicy::DropOldest, "default"));
+        assert_eq!(t.component("src").unwrap().params["count"].as_integer(), Some(10));
+    }
+
+    #[test]
+    fn reports_line_and_component() {
+        let bad = GOOD.replace("\"fields\", fields = [\"key\"]", "\"broadcast\"");
+        let err = TopologySpec::parse("t.toml", &bad).unwrap_err().to_string();
+        assert!(err.starts_with("t.toml:15: bolt \"b\": unknown grouping \"broadcast\""), "{err}");
+    }
+
+    #[test]
+    fn rejects_unknown_keys_with_line() {
+        let bad = GOOD.replace("parallelism = 3", "paralelism = 3");
+        let err = TopologySpec::parse("t.toml", &bad).unwrap_err().to_string();
+        assert!(err.starts_with("t.toml:14:"), "{err}");
+        assert!(err.contains("paralelism"), "{err}");
+    }
+}
