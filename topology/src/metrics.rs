@@ -19,7 +19,10 @@ fn new_histogram() -> Histogram<u64> {
 pub(crate) struct TaskStats {
     pub(crate) received: u64,
     pub(crate) emitted: u64,
+    /// Time in the component's own code, excluding `blocked`.
     pub(crate) busy: Duration,
+    /// Time emits waited for room in full `block` queues (backpressure).
+    pub(crate) blocked: Duration,
     pub(crate) wall: Duration,
     pub(crate) latency: Histogram<u64>,
     pub(crate) restarts: u32,
@@ -43,6 +46,7 @@ impl Default for TaskStats {
             received: 0,
             emitted: 0,
             busy: Duration::ZERO,
+            blocked: Duration::ZERO,
             wall: Duration::ZERO,
             latency: new_histogram(),
             restarts: 0,
@@ -165,8 +169,11 @@ pub struct TaskReport {
     pub undelivered: u64,
     /// Execute latency.
     pub execute: Latency,
-    /// Time spent in the component's code over wall time, percent.
+    /// Time spent in the component's code over wall time, percent
+    /// (waiting on backpressure excluded).
     pub busy_pct: f64,
+    /// Time emits waited on full downstream queues over wall time, percent.
+    pub backpressure_pct: f64,
     /// Deepest input queue seen.
     pub queue_depth_max: usize,
     /// Restarts after panics.
@@ -206,6 +213,8 @@ pub struct ComponentReport {
     pub execute: Latency,
     /// Mean busy percent over tasks.
     pub busy_pct: f64,
+    /// Mean backpressure percent over tasks.
+    pub backpressure_pct: f64,
     /// Deepest input queue of any task.
     pub queue_depth_max: usize,
     /// Restarts after panics.
@@ -258,6 +267,7 @@ pub(crate) fn task_report(task: usize, o: &TaskOutcome) -> TaskReport {
         undelivered: o.undelivered,
         execute: Latency::of(&s.latency),
         busy_pct: percent(s.busy, s.wall),
+        backpressure_pct: percent(s.blocked, s.wall),
         queue_depth_max: o.queue_depth_max,
         restarts: s.restarts,
         acked: s.acked,
@@ -306,6 +316,7 @@ pub(crate) fn component_report(
         undelivered: sum(|t| t.undelivered),
         execute: Latency::of(&latency),
         busy_pct: per_task.iter().map(|t| t.busy_pct).sum::<f64>() / per_task.len().max(1) as f64,
+        backpressure_pct: per_task.iter().map(|t| t.backpressure_pct).sum::<f64>() / per_task.len().max(1) as f64,
         queue_depth_max: per_task.iter().map(|t| t.queue_depth_max).max().unwrap_or(0),
         restarts: per_task.iter().map(|t| t.restarts).sum(),
         acked: sum(|t| t.acked),

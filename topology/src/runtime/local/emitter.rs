@@ -134,7 +134,7 @@ impl Emitter {
         let payload: Payload = Arc::new(value);
         let anchor = self.anchor.as_ref().map(Anchor::child);
         self.stats.emitted += 1;
-        self.deliver(&queue, Tuple { source, payload, anchor }).await
+        deliver(&queue, Tuple { source, payload, anchor }, &self.aborting, &mut self.stats.blocked).await
     }
 
     /// Marks the tuple being executed as failed: its spout (if it acks)
@@ -249,14 +249,10 @@ impl Emitter {
                     payload: payload.clone(),
                     anchor: parent.map(Anchor::child),
                 };
-                deliver(&sub.targets[i], tuple, &self.aborting).await?;
+                deliver(&sub.targets[i], tuple, &self.aborting, &mut self.stats.blocked).await?;
             }
         }
         Ok(())
-    }
-
-    async fn deliver(&mut self, queue: &EdgeQueue, tuple: Tuple) -> Result<(), EmitError> {
-        deliver(queue, tuple, &self.aborting).await
     }
 
     /// Replays a failed root.
@@ -265,8 +261,13 @@ impl Emitter {
     }
 }
 
-async fn deliver(queue: &EdgeQueue, tuple: Tuple, aborting: &AtomicBool) -> Result<(), EmitError> {
-    match queue.push(tuple).await {
+async fn deliver(
+    queue: &EdgeQueue,
+    tuple: Tuple,
+    aborting: &AtomicBool,
+    blocked: &mut Duration,
+) -> Result<(), EmitError> {
+    match queue.push(tuple, blocked).await {
         Push::Queued => Ok(()),
         Push::Dropped(victim) => {
             if let Some(a) = victim.anchor {

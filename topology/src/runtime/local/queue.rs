@@ -91,8 +91,9 @@ impl EdgeQueue {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Offers a tuple, waiting for room under `block`.
-    pub(crate) async fn push(&self, tuple: Tuple) -> Push {
+    /// Offers a tuple, waiting for room under `block`; time spent waiting is
+    /// added to `blocked`.
+    pub(crate) async fn push(&self, tuple: Tuple, blocked: &mut std::time::Duration) -> Push {
         let mut tuple = Some(tuple);
         loop {
             let notified = {
@@ -125,7 +126,9 @@ impl EdgeQueue {
                     }
                 }
             };
+            let waited = std::time::Instant::now();
             notified.await;
+            *blocked += waited.elapsed();
             self.lock().blocked_producers -= 1;
         }
     }
@@ -224,7 +227,7 @@ mod tests {
         let mut evicted = Vec::new();
         run(async {
             for i in 0..10 {
-                if let Push::Dropped(t) = q.push(tuple(i)).await {
+                if let Push::Dropped(t) = q.push(tuple(i), &mut Default::default()).await {
                     evicted.push(value(&t));
                 }
             }
@@ -241,7 +244,7 @@ mod tests {
         let q = EdgeQueue::new(2, OverflowPolicy::DropNewest, Arc::new(Notify::new()));
         run(async {
             for i in 0..5 {
-                q.push(tuple(i)).await;
+                q.push(tuple(i), &mut Default::default()).await;
             }
         });
         let mut out = VecDeque::new();
@@ -255,12 +258,12 @@ mod tests {
         let q = Arc::new(EdgeQueue::new(2, OverflowPolicy::Block, Arc::new(Notify::new())));
         let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_time().build().unwrap();
         rt.block_on(async {
-            q.push(tuple(0)).await;
-            q.push(tuple(1)).await;
+            q.push(tuple(0), &mut Default::default()).await;
+            q.push(tuple(1), &mut Default::default()).await;
             let mut out = VecDeque::new();
             assert_eq!(q.take(&mut out, 1), 1);
             let q2 = q.clone();
-            let producer = tokio::spawn(async move { q2.push(tuple(2)).await });
+            let producer = tokio::spawn(async move { q2.push(tuple(2), &mut Default::default()).await });
             tokio::time::sleep(std::time::Duration::from_millis(50)).await;
             assert!(!producer.is_finished(), "a full block queue must hold the producer");
             assert_eq!(q.depth(), 2);
@@ -274,9 +277,9 @@ mod tests {
     fn close_discards_and_refuses() {
         let q = EdgeQueue::new(4, OverflowPolicy::Block, Arc::new(Notify::new()));
         run(async {
-            q.push(tuple(0)).await;
+            q.push(tuple(0), &mut Default::default()).await;
             assert_eq!(q.close().len(), 1);
-            assert!(matches!(q.push(tuple(1)).await, Push::Closed(_)));
+            assert!(matches!(q.push(tuple(1), &mut Default::default()).await, Push::Closed(_)));
         });
         assert_eq!(q.counters.undelivered.load(Ordering::Relaxed), 2);
         assert_eq!(

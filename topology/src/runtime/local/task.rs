@@ -106,12 +106,13 @@ impl BoltTask {
         let out = &mut self.common.emitter;
         out.anchor = tuple.anchor.take();
         out.input_failed = false;
+        let blocked_before = out.stats.blocked;
         let start = Instant::now();
         let result = bolt.execute(tuple, out).await;
         let elapsed = start.elapsed();
         let stats = &mut out.stats;
         stats.received += 1;
-        stats.busy += elapsed;
+        stats.busy += elapsed.saturating_sub(stats.blocked - blocked_before);
         stats.latency.saturating_record((elapsed.as_nanos() as u64).max(1));
         if let Some(anchor) = out.anchor.take() {
             if out.input_failed || result.is_err() { anchor.fail() } else { anchor.complete() }
@@ -147,9 +148,11 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
                 let control = t.common.control.clone();
                 control.ticking.store(true, Ordering::SeqCst);
                 if control.stage() < Stage::Drain {
+                    let blocked_before = t.common.emitter.stats.blocked;
                     let start = Instant::now();
                     let result = bolt.tick(&mut t.common.emitter).await;
-                    t.common.emitter.stats.busy += start.elapsed();
+                    let stats = &mut t.common.emitter.stats;
+                    stats.busy += start.elapsed().saturating_sub(stats.blocked - blocked_before);
                     control.ticking.store(false, Ordering::SeqCst);
                     result?;
                 } else {
@@ -257,9 +260,11 @@ pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Res
         let signal = t.common.control.signal.clone();
         if !t.exhausted && pending < max_pending {
             let before = t.common.emitter.stats.emitted;
+            let blocked_before = t.common.emitter.stats.blocked;
             let start = Instant::now();
             let status = spout.next(&mut t.common.emitter).await?;
-            t.common.emitter.stats.busy += start.elapsed();
+            let stats = &mut t.common.emitter.stats;
+            stats.busy += start.elapsed().saturating_sub(stats.blocked - blocked_before);
             let emitted = t.common.emitter.stats.emitted - before;
             if let Some(p) = &t.progress {
                 p.emitted.fetch_add(emitted, Ordering::Relaxed);
