@@ -54,7 +54,7 @@ pub fn register(r: &mut Registry) {
             count: u64,
         }
         let P { count } = p.parse()?;
-        Ok(Sentences { count, next: 0, state: p.seed() ^ 0x5157_4f52_4443_4e54 })
+        Ok(Sentences { count, next: 0, text: SentenceGen::new(p.seed()) })
     });
     r.register_bolt("wordcount.split", |p| no_params(p).map(|()| Split));
     r.register_bolt("wordcount.count", |p| no_params(p).map(|()| Count::default()));
@@ -68,15 +68,29 @@ fn no_params(p: &squall_topology::Params) -> Result<(), ParamError> {
     }
 }
 
-/// The sentence for position `id` under `seed`: a fixed function, so a test
-/// can recompute the expected counts.
-pub fn sentence_index(state: &mut u64) -> usize {
-    // SplitMix64 step: portable and seedable.
-    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    ((z ^ (z >> 31)) % CORPUS.len() as u64) as usize
+/// The sentences a seed yields, in order: a fixed function of the seed, so
+/// a test can recompute the expected counts.
+#[derive(Debug, Clone)]
+pub struct SentenceGen(u64);
+
+impl SentenceGen {
+    /// The sequence for `seed`.
+    pub fn new(seed: u64) -> Self {
+        SentenceGen(seed ^ 0x5157_4f52_4443_4e54)
+    }
+}
+
+impl Iterator for SentenceGen {
+    type Item = &'static str;
+
+    fn next(&mut self) -> Option<&'static str> {
+        // SplitMix64: portable and seedable.
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        Some(CORPUS[((z ^ (z >> 31)) % CORPUS.len() as u64) as usize])
+    }
 }
 
 /// Emits `count` sentences drawn from [`CORPUS`] by a seeded generator.
@@ -84,7 +98,7 @@ pub fn sentence_index(state: &mut u64) -> usize {
 pub struct Sentences {
     count: u64,
     next: u64,
-    state: u64,
+    text: SentenceGen,
 }
 
 impl Spout for Sentences {
@@ -101,7 +115,7 @@ impl Spout for Sentences {
         if self.next == self.count {
             return Ok(SpoutStatus::Done);
         }
-        let text = CORPUS[sentence_index(&mut self.state)].to_string();
+        let text = self.text.next().expect("endless").to_string();
         out.emit("default", Sentence { id: self.next, text }).await?;
         self.next += 1;
         Ok(SpoutStatus::Continue)

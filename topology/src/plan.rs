@@ -226,20 +226,32 @@ fn order_or_cycle(spec: &TopologySpec, components: &[Planned], errors: &mut Vec<
             .expect("a stuck component has a stuck input");
         let prev = index(&input.from);
         if let Some(pos) = path.iter().position(|&p| p == prev) {
-            let mut cycle: Vec<&str> =
-                path[pos..].iter().rev().map(|&i| components[i].spec.name.as_str()).collect();
-            cycle.push(cycle[0]);
-            errors.push(spec.source.error_at_line(
-                input.line,
-                Some((c.spec.role, c.spec.name.as_str())),
-                format!(
-                    "undeclared cycle {}: mark the edge that closes it with `feedback = true`",
-                    cycle.join(" -> ")
-                ),
-            ));
+            // path[pos..] walks upstream; reversed it is the cycle in flow order.
+            let cycle: Vec<usize> = path[pos..].iter().rev().copied().collect();
+            errors.push(cycle_error(spec, components, &cycle));
             return order;
         }
         path.push(prev);
         current = prev;
     }
+}
+
+/// Reports a cycle (components in flow order) at the edge a user would mark:
+/// one that goes backwards in file order, printed last.
+fn cycle_error(spec: &TopologySpec, components: &[Planned], cycle: &[usize]) -> SpecError {
+    let m = cycle.len();
+    let back = (0..m).find(|&k| cycle[k] >= cycle[(k + 1) % m]).unwrap_or(m - 1);
+    let (from, to) = (cycle[back], cycle[(back + 1) % m]);
+    let names: Vec<&str> = (0..=m).map(|i| components[cycle[(back + 1 + i) % m]].spec.name.as_str()).collect();
+    let target = &components[to].spec;
+    let line = target
+        .inputs
+        .iter()
+        .find(|i| !i.feedback && i.from == components[from].spec.name)
+        .map_or(target.line, |i| i.line);
+    spec.source.error_at_line(
+        line,
+        Some((target.role, target.name.as_str())),
+        format!("undeclared cycle {}: mark the edge that closes it with `feedback = true`", names.join(" -> ")),
+    )
 }

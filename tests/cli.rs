@@ -1,0 +1,169 @@
+//! End-to-end tests of the `squall` binary on the example and test
+//! topologies.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use squall::builtin::wordcount::SentenceGen;
+
+fn squall(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the squall binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("squall-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn every_invalid_topology_gets_its_own_message_and_exit_code_2() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/invalid");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 10, "the corpus has {} files", files.len());
+    for file in files {
+        let content = std::fs::read_to_string(&file).unwrap();
+        let expected = content
+            .lines()
+            .next()
+            .and_then(|l| l.strip_prefix("# expect: "))
+            .unwrap_or_else(|| panic!("{} lacks an `# expect:` first line", file.display()));
+        let rel = format!("tests/invalid/{}", file.file_name().unwrap().to_string_lossy());
+        for command in ["validate", "run"] {
+            let out = squall(&[command, &rel]);
+            let stderr = text(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{command} {rel}: {stderr}");
+            assert!(
+                stderr.contains(&format!("tests/invalid/{expected}")),
+                "{command} {rel}\n expected: {expected}\n got: {stderr}"
+            );
+        }
+    }
+}
+
+#[test]
+fn wordcount_counts_exactly_and_writes_metrics() {
+    let dir = out_dir("wordcount");
+    let out = squall(&[
+        "run",
+        "examples/topologies/wordcount.toml",
+        "--set",
+        "sentences.params.count=5000",
+        "--set",
+        "count.parallelism=4",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("component") && stdout.contains("p99 exec"), "{stdout}");
+
+    let mut expected: BTreeMap<String, u64> = BTreeMap::new();
+    for sentence in SentenceGen::new(42).take(5000) {
+        for w in sentence.split_whitespace() {
+            *expected.entry(w.to_string()).or_default() += 1;
+        }
+    }
+    let tsv = std::fs::read_to_string(dir.join("wordcount.tsv")).unwrap();
+    let got: BTreeMap<String, u64> = tsv
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (w, c) = l.split_once('\t').unwrap();
+            (w.to_string(), c.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(got, expected);
+
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let components = metrics["components"].as_array().unwrap();
+    let count = components.iter().find(|c| c["name"] == "count").unwrap();
+    assert_eq!(count["tasks"], 4);
+    assert_eq!(count["per_task"].as_array().unwrap().len(), 4);
+    let words: u64 = expected.values().sum();
+    assert_eq!(count["received"], words);
+    assert!(count["execute"]["p99_us"].as_f64().unwrap() > 0.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn unknown_set_paths_are_rejected() {
+    let out = squall(&["run", "examples/topologies/wordcount.toml", "--set", "matcher.parallelism=4"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("no component named \"matcher\" (components: sentences, split, count, report)"));
+    let out = squall(&["validate", "examples/topologies/wordcount.toml", "--set", "split.paralelism=4"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("unknown key \"paralelism\""), "{}", text(&out.stderr));
+    let out = squall(&["validate", "examples/topologies/wordcount.toml", "--set", "split.parallelism"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn a_panicking_bolt_fails_the_run_naming_it() {
+    let dir = out_dir("panic");
+    let out = squall(&[
+        "run",
+        "examples/topologies/probe.toml",
+        "--set",
+        "source.params.count=1000",
+        "--set",
+        "relay.params.panic_at=100",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("error: the run failed: bolt \"relay\" task 0 panicked: injected panic at message 100"),
+        "{stderr}"
+    );
+    assert!(dir.join("metrics.json").exists(), "metrics are written for a failed run too");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn graph_labels_streams_groupings_and_dashes_feedback() {
+    let out = squall(&["graph", "tests/topologies/feedback.toml"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let dot = text(&out.stdout);
+    assert!(dot.starts_with("digraph \"feedback\" {"), "{dot}");
+    assert!(dot.contains("\"source\" -> \"a\" [label=\"default: Probe\\nfields(key)\"];"), "{dot}");
+    assert!(dot.contains("\"b\" -> \"a\" [label=\"default: Probe\\nshuffle\", style=dashed];"), "{dot}");
+    assert!(dot.contains("\"a\" -> \"b\" [label=\"default: Probe\\nglobal\"];"), "{dot}");
+    assert!(dot.contains("\"a\" [shape=box, label=\"a\\nprobe.relay ×2\"];"), "{dot}");
+}
+
+#[test]
+fn validate_reports_a_valid_topology() {
+    let out = squall(&["validate", "tests/topologies/feedback.toml"]);
+    assert!(out.status.success());
+    assert_eq!(
+        text(&out.stdout).trim(),
+        "tests/topologies/feedback.toml: topology \"feedback\" is valid (3 components, 4 tasks)"
+    );
+}
+
+#[test]
+fn help_shows_examples() {
+    let out = squall(&["--help"]);
+    assert!(out.status.success());
+    let help = text(&out.stdout);
+    for needle in ["run", "validate", "graph", "Examples:", "--set"] {
+        assert!(help.contains(needle), "{needle} missing from:\n{help}");
+    }
+}
