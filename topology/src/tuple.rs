@@ -27,9 +27,11 @@ pub enum Source {
 /// A message delivered to a bolt, with where it came from.
 #[derive(Debug)]
 pub struct Tuple {
-    pub(crate) source: Source,
+    pub(crate) source: Arc<Source>,
     pub(crate) payload: Payload,
-    pub(crate) anchor: Option<Anchor>,
+    /// Boxed: only spouts with acking have anchors, and a small tuple moves
+    /// faster through the queues.
+    pub(crate) anchor: Option<Box<Anchor>>,
 }
 
 impl Tuple {
@@ -62,7 +64,7 @@ impl Tuple {
 
     /// The producing component's name (`None` for peer messages).
     pub fn source_component(&self) -> Option<&str> {
-        match &self.source {
+        match &*self.source {
             Source::Stream { component, .. } => Some(component),
             Source::Peer { .. } => None,
         }
@@ -70,7 +72,7 @@ impl Tuple {
 
     /// The stream's name (`None` for peer messages).
     pub fn stream(&self) -> Option<&str> {
-        match &self.source {
+        match &*self.source {
             Source::Stream { stream, .. } => Some(stream),
             Source::Peer { .. } => None,
         }
@@ -78,7 +80,7 @@ impl Tuple {
 
     /// The index of the task that sent it.
     pub fn source_task(&self) -> usize {
-        match &self.source {
+        match &*self.source {
             Source::Stream { task, .. } | Source::Peer { task } => *task,
         }
     }

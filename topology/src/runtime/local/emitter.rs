@@ -40,7 +40,7 @@ pub(crate) struct Subscription {
 pub(crate) struct StreamRoute {
     pub(crate) name: Arc<str>,
     pub(crate) message: MessageType,
-    pub(crate) source: Source,
+    pub(crate) source: Arc<Source>,
     pub(crate) subscriptions: Vec<Subscription>,
 }
 
@@ -48,7 +48,7 @@ pub(crate) struct StreamRoute {
 #[derive(Debug)]
 pub(crate) struct PeerRoute {
     pub(crate) message: MessageType,
-    pub(crate) source: Source,
+    pub(crate) source: Arc<Source>,
     pub(crate) targets: Vec<Arc<EdgeQueue>>,
 }
 
@@ -66,7 +66,7 @@ pub struct Emitter {
     pub(crate) peers: Option<PeerRoute>,
     pub(crate) acking: Option<SpoutAcking>,
     /// The anchor of the tuple being executed.
-    pub(crate) anchor: Option<Anchor>,
+    pub(crate) anchor: Option<Box<Anchor>>,
     pub(crate) input_failed: bool,
     pub(crate) stats: TaskStats,
     pub(crate) aborting: Arc<AtomicBool>,
@@ -132,7 +132,7 @@ impl Emitter {
         let queue = peers.targets.get(task).ok_or(EmitError::NoSuchTask { task, count })?.clone();
         let source = peers.source.clone();
         let payload: Payload = Arc::new(value);
-        let anchor = self.anchor.as_ref().map(Anchor::child);
+        let anchor = self.anchor.as_ref().map(|a| Box::new(a.child()));
         self.stats.emitted += 1;
         deliver(&queue, Tuple { source, payload, anchor }, &self.aborting, &mut self.stats.blocked).await
     }
@@ -217,7 +217,7 @@ impl Emitter {
         root: Option<&Anchor>,
     ) -> Result<(), EmitError> {
         let stream = &mut self.streams[index];
-        let parent = root.or(self.anchor.as_ref());
+        let parent = root.or(self.anchor.as_deref());
         if direct.is_none() && stream.subscriptions.iter().any(|s| matches!(s.route, Route::Direct)) {
             return Err(EmitError::DirectNeedsTask(stream.name.to_string()));
         }
@@ -247,7 +247,7 @@ impl Emitter {
                 let tuple = Tuple {
                     source: stream.source.clone(),
                     payload: payload.clone(),
-                    anchor: parent.map(Anchor::child),
+                    anchor: parent.map(|a| Box::new(a.child())),
                 };
                 deliver(&sub.targets[i], tuple, &self.aborting, &mut self.stats.blocked).await?;
             }

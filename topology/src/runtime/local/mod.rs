@@ -316,14 +316,18 @@ impl Wiring {
                                 StreamRoute {
                                     name: name.clone(),
                                     message: decl.message,
-                                    source: Source::Stream { component: component.clone(), stream: name, task: t },
+                                    source: Arc::new(Source::Stream {
+                                        component: component.clone(),
+                                        stream: name,
+                                        task: t,
+                                    }),
                                     subscriptions,
                                 }
                             })
                             .collect();
                         let peers = p.declared.peer.map(|message| PeerRoute {
                             message,
-                            source: Source::Peer { task: t },
+                            source: Arc::new(Source::Peer { task: t }),
                             targets: peer[c].clone().expect("peer queues exist when declared"),
                         });
                         let acking = p.spec.ack.map(|a| SpoutAcking {
@@ -416,8 +420,9 @@ impl<'a> Coordinator<'a> {
         let ticking = self.wiring.controls.iter().flatten().any(|c| c.ticking.load(Ordering::SeqCst));
         let (mut accepted, mut resolved) = (0, 0);
         for q in self.wiring.all_queues() {
-            resolved += q.counters.resolved.load(Ordering::Acquire);
-            accepted += q.counters.accepted.load(Ordering::Acquire);
+            let (a, r) = q.totals();
+            accepted += a;
+            resolved += r;
         }
         let scan = (accepted, resolved);
         let stable = !ticking && accepted == resolved && self.last_scan == Some(scan);

@@ -37,15 +37,15 @@ struct State {
     closed: bool,
     max_depth: usize,
     blocked_producers: usize,
+    /// Tuples that entered the queue.
+    accepted: u64,
+    /// Tuples executed, evicted or discarded.
+    resolved: u64,
 }
 
-/// Totals of one queue.
+/// Loss counters of one queue.
 #[derive(Debug, Default)]
 pub(crate) struct QueueCounters {
-    /// Tuples that entered the queue.
-    pub(crate) accepted: AtomicU64,
-    /// Tuples executed, evicted or discarded.
-    pub(crate) resolved: AtomicU64,
     /// Tuples lost to a drop policy.
     pub(crate) dropped: AtomicU64,
     /// Tuples that arrived after the consumer exited, or were left queued
@@ -113,7 +113,7 @@ impl EdgeQueue {
                     OverflowPolicy::DropOldest => {
                         let victim = s.buf.pop_front().expect("full drop_oldest queue is non-empty");
                         self.counters.dropped.fetch_add(1, Ordering::Relaxed);
-                        self.counters.resolved.fetch_add(1, Ordering::Relaxed);
+                        s.resolved += 1;
                         return self.enqueue(s, tuple.take().expect("present"), Some(victim));
                     }
                     OverflowPolicy::Block => {
@@ -136,10 +136,10 @@ impl EdgeQueue {
     fn enqueue(&self, mut s: std::sync::MutexGuard<'_, State>, tuple: Tuple, victim: Option<Tuple>) -> Push {
         let was_empty = s.buf.is_empty();
         s.buf.push_back(tuple);
+        s.accepted += 1;
         let depth = s.buf.len() + s.taken;
         s.max_depth = s.max_depth.max(depth);
         drop(s);
-        self.counters.accepted.fetch_add(1, Ordering::Relaxed);
         if was_empty {
             self.consumer.notify_one();
         }
@@ -167,9 +167,9 @@ impl EdgeQueue {
         let wake = {
             let mut s = self.lock();
             s.taken -= n;
+            s.resolved += n as u64;
             s.blocked_producers > 0
         };
-        self.counters.resolved.fetch_add(n as u64, Ordering::Release);
         if wake {
             self.room.notify_waiters();
         }
@@ -182,13 +182,18 @@ impl EdgeQueue {
         let discarded: Vec<Tuple> = {
             let mut s = self.lock();
             s.closed = true;
+            s.resolved += s.buf.len() as u64;
             s.buf.drain(..).collect()
         };
-        let n = discarded.len() as u64;
-        self.counters.undelivered.fetch_add(n, Ordering::Relaxed);
-        self.counters.resolved.fetch_add(n, Ordering::Release);
+        self.counters.undelivered.fetch_add(discarded.len() as u64, Ordering::Relaxed);
         self.room.notify_waiters();
         discarded
+    }
+
+    /// (accepted, resolved) totals, read together.
+    pub(crate) fn totals(&self) -> (u64, u64) {
+        let s = self.lock();
+        (s.accepted, s.resolved)
     }
 
     /// The deepest the queue has been (waiting + handed over).
@@ -210,7 +215,7 @@ mod tests {
     use crate::tuple::Source;
 
     fn tuple(i: u64) -> Tuple {
-        Tuple { source: Source::Peer { task: 0 }, payload: Arc::new(i), anchor: None }
+        Tuple { source: Arc::new(Source::Peer { task: 0 }), payload: Arc::new(i), anchor: None }
     }
 
     fn value(t: &Tuple) -> u64 {
@@ -282,9 +287,7 @@ mod tests {
             assert!(matches!(q.push(tuple(1), &mut Default::default()).await, Push::Closed(_)));
         });
         assert_eq!(q.counters.undelivered.load(Ordering::Relaxed), 2);
-        assert_eq!(
-            q.counters.accepted.load(Ordering::Relaxed),
-            q.counters.resolved.load(Ordering::Relaxed)
-        );
+        let (accepted, resolved) = q.totals();
+        assert_eq!((accepted, resolved), (1, 1));
     }
 }
