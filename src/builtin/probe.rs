@@ -28,6 +28,8 @@ pub struct Probe {
 const HEADER_BYTES: usize = 24;
 /// Most messages one `next` call emits.
 const BURST: u64 = 256;
+/// Waits shorter than this are done by yielding rather than a timer.
+const FINE_PACING: Duration = Duration::from_micros(100);
 
 fn now_ns() -> u64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
@@ -112,7 +114,15 @@ impl Spout for ProbeSource {
             burst = burst.min(due.saturating_sub(self.next_seq));
             if burst == 0 {
                 let next_due = started + Duration::from_secs_f64((self.next_seq + 1) as f64 / rate);
-                tokio::time::sleep_until(next_due.into()).await;
+                let wait = next_due.saturating_duration_since(Instant::now());
+                if wait < FINE_PACING {
+                    // Timers are coarse (about 1 ms); short waits yield the
+                    // core instead, so that paced messages leave one by one
+                    // rather than in bursts.
+                    std::thread::yield_now();
+                } else {
+                    tokio::time::sleep_until(next_due.into()).await;
+                }
                 return Ok(SpoutStatus::Continue);
             }
         }
