@@ -101,5 +101,10 @@ fn latency(_c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, throughput, latency);
-criterion_main!(benches);
+// The macro generates an undocumented public function.
+#[allow(missing_docs)]
+mod group {
+    use super::*;
+    criterion_group!(benches, throughput, latency);
+}
+criterion_main!(group::benches);

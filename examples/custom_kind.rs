@@ -11,8 +11,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 use squall::topology::{
-    Bolt, BoxError, Declarer, Emitter, Params, RunOptions, Spout, SpoutStatus, Topology, TopologySpec,
-    Tuple, run,
+    Bolt, BoxError, Declarer, Emitter, Params, RunOptions, Spout, SpoutStatus, Topology, TopologySpec, Tuple,
+    run,
 };
 
 /// One sensor reading.

@@ -105,7 +105,10 @@ fn wordcount_counts_exactly_and_writes_metrics() {
 fn unknown_set_paths_are_rejected() {
     let out = squall(&["run", "examples/topologies/wordcount.toml", "--set", "matcher.parallelism=4"]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(text(&out.stderr).contains("no component named \"matcher\" (components: sentences, split, count, report)"));
+    assert!(
+        text(&out.stderr)
+            .contains("no component named \"matcher\" (components: sentences, split, count, report)")
+    );
     let out = squall(&["validate", "examples/topologies/wordcount.toml", "--set", "split.paralelism=4"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("unknown key \"paralelism\""), "{}", text(&out.stderr));
@@ -129,7 +132,8 @@ fn a_panicking_bolt_fails_the_run_naming_it() {
     assert_eq!(out.status.code(), Some(1));
     let stderr = text(&out.stderr);
     assert!(
-        stderr.contains("error: the run failed: bolt \"relay\" task 0 panicked: injected panic at message 100"),
+        stderr
+            .contains("error: the run failed: bolt \"relay\" task 0 panicked: injected panic at message 100"),
         "{stderr}"
     );
     assert!(dir.join("metrics.json").exists(), "metrics are written for a failed run too");
@@ -166,4 +170,37 @@ fn help_shows_examples() {
     for needle in ["run", "validate", "graph", "Examples:", "--set"] {
         assert!(help.contains(needle), "{needle} missing from:\n{help}");
     }
+}
+
+#[test]
+fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
+    let dir = out_dir("ctrl-c");
+    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["run", "examples/topologies/probe.toml", "--set", "source.params.count=1000000000"])
+        .args(["--set", "source.params.rate_hz=100000", "--out", dir.to_str().unwrap()])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("stopped early by Ctrl-C"), "{stderr}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let counts: Vec<(u64, u64)> = metrics["components"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| (c["received"].as_u64().unwrap(), c["emitted"].as_u64().unwrap()))
+        .collect();
+    let emitted = counts[0].1;
+    assert!(emitted > 0 && emitted < 1_000_000_000);
+    assert_eq!(counts[1], (emitted, emitted), "relay: every emitted tuple was processed");
+    assert_eq!(counts[2].0, emitted, "sink: every emitted tuple was processed");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -7,8 +7,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 use squall_topology::{
-    Bolt, BoxError, Declarer, Emitter, ParamError, Params, Registry, Spout, SpoutStatus, TaskContext,
-    Tuple,
+    Bolt, BoxError, Declarer, Emitter, ParamError, Params, Registry, Spout, SpoutStatus, TaskContext, Tuple,
 };
 
 /// A probe message: a sequence number, a key, the send time and padding.
@@ -130,7 +129,8 @@ impl Spout for ProbeSource {
         for _ in 0..burst {
             let seq = self.next_seq;
             self.next_seq += 1;
-            let probe = Probe { seq, key: seq % self.params.keys, sent_ns: now_ns(), payload: vec![0; padding] };
+            let probe =
+                Probe { seq, key: seq % self.params.keys, sent_ns: now_ns(), payload: vec![0; padding] };
             out.emit("default", probe).await?;
         }
         Ok(if self.next_seq == self.params.count { SpoutStatus::Done } else { SpoutStatus::Continue })

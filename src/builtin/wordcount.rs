@@ -190,7 +190,9 @@ impl Bolt for Report {
         let wc = input.get::<WordCount>().ok_or("wordcount.report expects WordCount")?;
         let total = self.totals.entry(wc.word.clone()).or_default();
         if *total > 0 {
-            return Err(format!("word \"{}\" was counted by two tasks: fields grouping broken", wc.word).into());
+            return Err(
+                format!("word \"{}\" was counted by two tasks: fields grouping broken", wc.word).into()
+            );
         }
         *total += wc.count;
         Ok(())
@@ -198,7 +200,9 @@ impl Bolt for Report {
 
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         out.count("words", self.totals.values().sum());
-        let Some(dir) = &self.out_dir else { return Ok(()) };
+        let Some(dir) = &self.out_dir else {
+            return Ok(());
+        };
         let mut rows: Vec<(&String, &u64)> = self.totals.iter().collect();
         rows.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
         let mut text = String::from("word\tcount\n");

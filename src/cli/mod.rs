@@ -87,12 +87,10 @@ pub(crate) fn main() -> ExitCode {
         }
     };
     match cli.command {
-        Command::Run { topology, out, quiet } => {
-            match load(&topology) {
-                Ok(t) => run::run(&t, out, quiet),
-                Err(code) => code,
-            }
-        }
+        Command::Run { topology, out, quiet } => match load(&topology) {
+            Ok(t) => run::run(&t, out, quiet),
+            Err(code) => code,
+        },
         Command::Validate { topology } => match load(&topology) {
             Ok(t) => {
                 let tasks: usize = t.spec().components.iter().map(|c| c.parallelism).sum();
@@ -132,11 +130,15 @@ pub(crate) fn main() -> ExitCode {
 /// returns the exit code.
 fn load(args: &TopologyArgs) -> Result<Topology, ExitCode> {
     let registry = squall::builtin::registry();
-    let validated = TopologySpec::load(&args.file, &args.overrides)
-        .and_then(|spec| Topology::validate(spec, &registry));
+    let validated =
+        TopologySpec::load(&args.file, &args.overrides).and_then(|spec| Topology::validate(spec, &registry));
     validated.map_err(|errors: SpecErrors| {
         eprintln!("{errors}");
-        eprintln!("error: invalid topology ({} problem{})", errors.0.len(), if errors.0.len() == 1 { "" } else { "s" });
+        eprintln!(
+            "error: invalid topology ({} problem{})",
+            errors.0.len(),
+            if errors.0.len() == 1 { "" } else { "s" }
+        );
         ExitCode::from(EXIT_INVALID)
     })
 }

@@ -29,9 +29,10 @@ impl ProgressDisplay {
                 "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} tuples from spouts ({per_sec}, eta {eta})",
             )
             .expect("valid template");
-            let open_ended =
-                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {pos} tuples from spouts ({per_sec})")
-                    .expect("valid template");
+            let open_ended = ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {pos} tuples from spouts ({per_sec})",
+            )
+            .expect("valid template");
             bar.set_style(open_ended.clone());
             while !flag.load(Ordering::Relaxed) {
                 let expected = progress.expected.load(Ordering::Relaxed);

@@ -74,11 +74,7 @@ pub trait Bolt: Send + 'static {
     /// Processes one tuple. Emits are anchored to it when its spout acks.
     /// An `Err` is fatal for the task (see the component's restart policy);
     /// to fail just this tuple, call [`Emitter::fail`].
-    fn execute(
-        &mut self,
-        input: Tuple,
-        out: &mut Emitter,
-    ) -> impl Future<Output = Result<(), BoxError>>;
+    fn execute(&mut self, input: Tuple, out: &mut Emitter) -> impl Future<Output = Result<(), BoxError>>;
 
     /// Called at the declared tick period.
     fn tick(&mut self, out: &mut Emitter) -> impl Future<Output = Result<(), BoxError>> {

@@ -54,6 +54,3 @@ pub enum EmitError {
     #[error("the run is shutting down")]
     ShuttingDown,
 }
-
-
-

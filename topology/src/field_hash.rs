@@ -57,10 +57,7 @@ impl<'a> Extend<&'a u8> for Fnv {
 }
 
 /// Hashes the fields of `value` named in `fields`, in the struct's order.
-pub(crate) fn hash_fields<T: Serialize + ?Sized>(
-    value: &T,
-    fields: &[&str],
-) -> Result<u64, FieldHashError> {
+pub(crate) fn hash_fields<T: Serialize + ?Sized>(value: &T, fields: &[&str]) -> Result<u64, FieldHashError> {
     let hash = value.serialize(FieldHasher { fields })?;
     Ok(hash.finish())
 }
@@ -84,8 +81,8 @@ impl ser::SerializeStruct for StructFields<'_> {
         value: &V,
     ) -> Result<(), FieldHashError> {
         if self.fields.contains(&key) {
-            self.hash = postcard::to_extend(value, self.hash)
-                .map_err(|e| FieldHashError::Encode(e.to_string()))?;
+            self.hash =
+                postcard::to_extend(value, self.hash).map_err(|e| FieldHashError::Encode(e.to_string()))?;
         }
         Ok(())
     }
@@ -175,11 +172,7 @@ impl<'f> ser::Serializer for FieldHasher<'f> {
         Err(FieldHashError::NotAStruct)
     }
 
-    fn serialize_struct(
-        self,
-        _: &'static str,
-        _: usize,
-    ) -> Result<Self::SerializeStruct, FieldHashError> {
+    fn serialize_struct(self, _: &'static str, _: usize) -> Result<Self::SerializeStruct, FieldHashError> {
         Ok(StructFields { fields: self.fields, hash: Fnv(Fnv::OFFSET) })
     }
 

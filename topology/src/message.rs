@@ -113,9 +113,7 @@ impl fmt::Debug for MessageType {
 }
 
 fn downcast<T: 'static>(payload: &(dyn Any + Send + Sync)) -> &T {
-    payload
-        .downcast_ref::<T>()
-        .expect("MessageType used with a payload of another type")
+    payload.downcast_ref::<T>().expect("MessageType used with a payload of another type")
 }
 
 fn hash_payload<T: Message>(

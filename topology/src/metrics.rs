@@ -316,7 +316,8 @@ pub(crate) fn component_report(
         undelivered: sum(|t| t.undelivered),
         execute: Latency::of(&latency),
         busy_pct: per_task.iter().map(|t| t.busy_pct).sum::<f64>() / per_task.len().max(1) as f64,
-        backpressure_pct: per_task.iter().map(|t| t.backpressure_pct).sum::<f64>() / per_task.len().max(1) as f64,
+        backpressure_pct: per_task.iter().map(|t| t.backpressure_pct).sum::<f64>()
+            / per_task.len().max(1) as f64,
         queue_depth_max: per_task.iter().map(|t| t.queue_depth_max).max().unwrap_or(0),
         restarts: per_task.iter().map(|t| t.restarts).sum(),
         acked: sum(|t| t.acked),

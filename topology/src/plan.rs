@@ -59,11 +59,7 @@ impl Topology {
             check_inputs(&spec, &components, &mut errors);
         }
         let order = if errors.is_empty() { order_or_cycle(&spec, &components, &mut errors) } else { vec![] };
-        if errors.is_empty() {
-            Ok(Topology { spec, components, order })
-        } else {
-            Err(SpecErrors(errors))
-        }
+        if errors.is_empty() { Ok(Topology { spec, components, order }) } else { Err(SpecErrors(errors)) }
     }
 
     /// The topology's name.
@@ -117,7 +113,11 @@ fn instantiate(
         Factory::Bolt(f) => f(&params).map(|b| b.declare(&mut declared)),
     };
     if let Err(e) = built {
-        errors.push(spec.source.error_at_line(c.params_line, at, format!("bad params for kind \"{}\": {e}", c.kind)));
+        errors.push(spec.source.error_at_line(
+            c.params_line,
+            at,
+            format!("bad params for kind \"{}\": {e}", c.kind),
+        ));
         return None;
     }
     if c.role == Role::Bolt && c.inputs.is_empty() {
@@ -141,7 +141,8 @@ fn check_inputs(spec: &TopologySpec, components: &[Planned], errors: &mut Vec<Sp
                 continue;
             };
             let Some(stream) = producer.declared.stream(&input.stream) else {
-                let streams: Vec<&str> = producer.declared.outputs().iter().map(|s| s.name.as_str()).collect();
+                let streams: Vec<&str> =
+                    producer.declared.outputs().iter().map(|s| s.name.as_str()).collect();
                 errors.push(error(format!(
                     "{} \"{}\" has no stream \"{}\" (it declares: {})",
                     producer.spec.role,
@@ -166,10 +167,10 @@ fn check_inputs(spec: &TopologySpec, components: &[Planned], errors: &mut Vec<Sp
             if let Grouping::Fields(fields) = &input.grouping {
                 for f in fields {
                     if !stream.message.has_field(f) {
-                        let available = stream
-                            .message
-                            .fields()
-                            .map_or("it has no named fields".to_string(), |fs| format!("fields: {}", fs.join(", ")));
+                        let available =
+                            stream.message.fields().map_or("it has no named fields".to_string(), |fs| {
+                                format!("fields: {}", fs.join(", "))
+                            });
                         errors.push(error(format!(
                             "grouping field \"{f}\" is not a field of {} on stream \"{}\" ({available})",
                             stream.message.name(),
@@ -242,7 +243,8 @@ fn cycle_error(spec: &TopologySpec, components: &[Planned], cycle: &[usize]) -> 
     let m = cycle.len();
     let back = (0..m).find(|&k| cycle[k] >= cycle[(k + 1) % m]).unwrap_or(m - 1);
     let (from, to) = (cycle[back], cycle[(back + 1) % m]);
-    let names: Vec<&str> = (0..=m).map(|i| components[cycle[(back + 1 + i) % m]].spec.name.as_str()).collect();
+    let names: Vec<&str> =
+        (0..=m).map(|i| components[cycle[(back + 1 + i) % m]].spec.name.as_str()).collect();
     let target = &components[to].spec;
     let line = target
         .inputs
@@ -252,6 +254,9 @@ fn cycle_error(spec: &TopologySpec, components: &[Planned], cycle: &[usize]) -> 
     spec.source.error_at_line(
         line,
         Some((target.role, target.name.as_str())),
-        format!("undeclared cycle {}: mark the edge that closes it with `feedback = true`", names.join(" -> ")),
+        format!(
+            "undeclared cycle {}: mark the edge that closes it with `feedback = true`",
+            names.join(" -> ")
+        ),
     )
 }

@@ -10,10 +10,8 @@ use crate::error::ParamError;
 use crate::params::Params;
 use crate::runtime::local::erased::{BoltRunner, SpoutRunner};
 
-pub(crate) type SpoutFactory =
-    Arc<dyn Fn(&Params) -> Result<Box<dyn SpoutRunner>, ParamError> + Send + Sync>;
-pub(crate) type BoltFactory =
-    Arc<dyn Fn(&Params) -> Result<Box<dyn BoltRunner>, ParamError> + Send + Sync>;
+pub(crate) type SpoutFactory = Arc<dyn Fn(&Params) -> Result<Box<dyn SpoutRunner>, ParamError> + Send + Sync>;
+pub(crate) type BoltFactory = Arc<dyn Fn(&Params) -> Result<Box<dyn BoltRunner>, ParamError> + Send + Sync>;
 
 /// Maps kind names to component factories.
 ///
@@ -50,8 +48,7 @@ impl Registry {
         S: Spout,
         F: Fn(&Params) -> Result<S, ParamError> + Send + Sync + 'static,
     {
-        let erased: SpoutFactory =
-            Arc::new(move |p| factory(p).map(|s| Box::new(s) as Box<dyn SpoutRunner>));
+        let erased: SpoutFactory = Arc::new(move |p| factory(p).map(|s| Box::new(s) as Box<dyn SpoutRunner>));
         self.spouts.insert(kind.to_string(), erased);
         self
     }
@@ -63,8 +60,7 @@ impl Registry {
         B: Bolt,
         F: Fn(&Params) -> Result<B, ParamError> + Send + Sync + 'static,
     {
-        let erased: BoltFactory =
-            Arc::new(move |p| factory(p).map(|b| Box::new(b) as Box<dyn BoltRunner>));
+        let erased: BoltFactory = Arc::new(move |p| factory(p).map(|b| Box::new(b) as Box<dyn BoltRunner>));
         self.bolts.insert(kind.to_string(), erased);
         self
     }

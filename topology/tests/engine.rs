@@ -160,7 +160,8 @@ impl Harness {
                 failed: failed.clone(),
             })
         });
-        let (log, in_flight_max, emitted) = (self.log.clone(), self.in_flight_max.clone(), self.emitted.clone());
+        let (log, in_flight_max, emitted) =
+            (self.log.clone(), self.in_flight_max.clone(), self.emitted.clone());
         r.register_bolt("recorder", move |p: &Params| {
             Ok(Recorder {
                 p: p.parse()?,
@@ -284,13 +285,17 @@ fn block_bounds_in_flight_and_slows_the_spout() {
     let count = 200;
     let started = Instant::now();
     let report = h
-        .run(&two_stage(count, r#"grouping = "shuffle", queue = 4, policy = "block""#, 1, "").replace(
-            "kind = \"recorder\"",
-            "kind = \"recorder\"\nparams = { delay_us = 1000 }",
-        ))
+        .run(
+            &two_stage(count, r#"grouping = "shuffle", queue = 4, policy = "block""#, 1, "")
+                .replace("kind = \"recorder\"", "kind = \"recorder\"\nparams = { delay_us = 1000 }"),
+        )
         .unwrap();
     let elapsed = started.elapsed();
-    assert!(h.in_flight_max.load(Ordering::SeqCst) <= 4, "in flight {}", h.in_flight_max.load(Ordering::SeqCst));
+    assert!(
+        h.in_flight_max.load(Ordering::SeqCst) <= 4,
+        "in flight {}",
+        h.in_flight_max.load(Ordering::SeqCst)
+    );
     assert!(report.component("b").unwrap().queue_depth_max <= 4);
     assert_eq!(report.component("b").unwrap().received, count);
     // The spout cannot finish before the bolt has worked through all but the
@@ -305,10 +310,10 @@ fn drop_oldest_keeps_newest_and_counts_exactly() {
     let h = Harness::new();
     let count = 500;
     let report = h
-        .run(&two_stage(count, r#"grouping = "shuffle", queue = 2, policy = "drop_oldest""#, 1, "").replace(
-            "kind = \"recorder\"",
-            "kind = \"recorder\"\nparams = { delay_us = 200 }",
-        ))
+        .run(
+            &two_stage(count, r#"grouping = "shuffle", queue = 2, policy = "drop_oldest""#, 1, "")
+                .replace("kind = \"recorder\"", "kind = \"recorder\"\nparams = { delay_us = 200 }"),
+        )
         .unwrap();
     let seen = &h.per_task("b")[&0];
     let b = report.component("b").unwrap();
@@ -324,10 +329,10 @@ fn drop_newest_counts_exactly() {
     let h = Harness::new();
     let count = 500;
     let report = h
-        .run(&two_stage(count, r#"grouping = "shuffle", queue = 2, policy = "drop_newest""#, 1, "").replace(
-            "kind = \"recorder\"",
-            "kind = \"recorder\"\nparams = { delay_us = 200 }",
-        ))
+        .run(
+            &two_stage(count, r#"grouping = "shuffle", queue = 2, policy = "drop_newest""#, 1, "")
+                .replace("kind = \"recorder\"", "kind = \"recorder\"\nparams = { delay_us = 200 }"),
+        )
         .unwrap();
     let b = report.component("b").unwrap();
     assert!(b.dropped > 0);
@@ -392,8 +397,7 @@ fn acking_replays_timed_out_tuples() {
 #[test]
 fn acking_counts_abandoned_tuples() {
     let h = Harness::new();
-    let report =
-        h.run(&acked(10, "{ fail_first = 1 }", "{ timeout_secs = 30, max_retries = 0 }")).unwrap();
+    let report = h.run(&acked(10, "{ fail_first = 1 }", "{ timeout_secs = 30, max_retries = 0 }")).unwrap();
     let src = report.component("src").unwrap();
     assert_eq!((src.acked, src.failed, src.abandoned), (9, 1, 1));
     assert!(report.warnings.iter().any(|w| w.contains("abandoned")), "{:?}", report.warnings);
@@ -587,7 +591,9 @@ fn feedback_loops_finish_and_ticks_fire() {
     let log = h.log.clone();
     let ticks = Arc::new(AtomicU64::new(0));
     let t2 = ticks.clone();
-    r.register_bolt("looper", move |_: &Params| Ok(Looper { limit: 5, log: log.clone(), tick_count: t2.clone() }));
+    r.register_bolt("looper", move |_: &Params| {
+        Ok(Looper { limit: 5, log: log.clone(), tick_count: t2.clone() })
+    });
     r.register_bolt("relay", |_: &Params| Ok::<_, ParamError>(Relay));
     let toml = r#"
 [topology]

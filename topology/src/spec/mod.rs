@@ -14,8 +14,8 @@ use std::time::Duration;
 
 use toml::Spanned;
 
-pub use error::{Role, SpecError, SpecErrors};
 pub(crate) use error::SourceText;
+pub use error::{Role, SpecError, SpecErrors};
 pub use overrides::Override;
 
 use crate::declare::DEFAULT_STREAM;
@@ -180,11 +180,8 @@ fn convert(raw: RawFile, source: SourceText) -> Result<TopologySpec, SpecErrors>
         errors.push(source.error_at_line(1, None, "a topology needs at least one [[spout]]"));
     }
     let mut components = Vec::new();
-    let all = raw
-        .spout
-        .into_iter()
-        .map(|c| (Role::Spout, c))
-        .chain(raw.bolt.into_iter().map(|c| (Role::Bolt, c)));
+    let all =
+        raw.spout.into_iter().map(|c| (Role::Spout, c)).chain(raw.bolt.into_iter().map(|c| (Role::Bolt, c)));
     for (role, comp) in all {
         let line = source.line(comp.span().start);
         let comp = comp.into_inner();
@@ -261,11 +258,7 @@ fn convert_component(
     };
     let ack = comp.ack.as_ref().and_then(|a| {
         if role == Role::Bolt {
-            errors.push(source.error(
-                a.span().start,
-                at,
-                "ack is a spout setting (bolts ack automatically)",
-            ));
+            errors.push(source.error(a.span().start, at, "ack is a spout setting (bolts ack automatically)"));
             return None;
         }
         let r = a.get_ref();
@@ -330,7 +323,9 @@ fn convert_input(
     let grouping_name = input.grouping.as_ref().map_or("shuffle", |g| g.get_ref().as_str());
     let grouping_at = input.grouping.as_ref().map_or(line, |g| source.line(g.span().start));
     let grouping = match (grouping_name, &input.fields) {
-        ("fields", Some(fields)) if !fields.get_ref().is_empty() => Grouping::Fields(fields.get_ref().clone()),
+        ("fields", Some(fields)) if !fields.get_ref().is_empty() => {
+            Grouping::Fields(fields.get_ref().clone())
+        }
         ("fields", _) => {
             errors.push(source.error_at_line(
                 grouping_at,
@@ -356,10 +351,7 @@ fn convert_input(
             errors.push(source.error_at_line(
                 grouping_at,
                 at,
-                format!(
-                    "unknown grouping \"{other}\" (expected one of {})",
-                    Grouping::NAMES.join(", ")
-                ),
+                format!("unknown grouping \"{other}\" (expected one of {})", Grouping::NAMES.join(", ")),
             ));
             Grouping::Shuffle
         }

@@ -12,9 +12,8 @@ use std::str::FromStr;
 use toml_edit::{DocumentMut, Item, TableLike, Value};
 
 /// Keys a component table may hold (the file contract).
-const COMPONENT_KEYS: &[&str] = &[
-    "name", "kind", "parallelism", "params", "inputs", "tick_secs", "restart", "ack", "peer_queue",
-];
+const COMPONENT_KEYS: &[&str] =
+    &["name", "kind", "parallelism", "params", "inputs", "tick_secs", "restart", "ack", "peer_queue"];
 const INPUT_KEYS: &[&str] = &["from", "stream", "grouping", "fields", "queue", "policy", "feedback"];
 const TOPOLOGY_KEYS: &[&str] = &["name", "seed"];
 
@@ -37,9 +36,7 @@ impl FromStr for Override {
             .ok_or_else(|| format!("--set {s}: expected PATH=VALUE, e.g. matcher.parallelism=4"))?;
         let path: Vec<String> = path.trim().split('.').map(str::to_string).collect();
         if path.len() < 2 || path.iter().any(String::is_empty) {
-            return Err(format!(
-                "--set {s}: PATH must be COMPONENT.KEY[.KEY...] or topology.KEY"
-            ));
+            return Err(format!("--set {s}: PATH must be COMPONENT.KEY[.KEY...] or topology.KEY"));
         }
         let raw = raw.trim();
         let value = raw.parse::<Value>().unwrap_or_else(|_| Value::from(raw));
@@ -67,9 +64,7 @@ fn apply_one(doc: &mut DocumentMut, o: &Override) -> Result<(), String> {
     let rest = &o.path[1..];
     if head == "topology" {
         check_key(&rest[0], TOPOLOGY_KEYS, "[topology]")?;
-        let table = doc
-            .get_mut("topology")
-            .ok_or("the file has no [topology] table")?;
+        let table = doc.get_mut("topology").ok_or("the file has no [topology] table")?;
         return set_in_item(table, rest, o.value.clone(), false);
     }
     check_key(&rest[0], COMPONENT_KEYS, &format!("component \"{head}\""))?;
@@ -85,10 +80,7 @@ fn check_key(key: &str, allowed: &[&str], what: &str) -> Result<(), String> {
     }
 }
 
-fn find_component<'d>(
-    doc: &'d mut DocumentMut,
-    name: &str,
-) -> Result<&'d mut toml_edit::Table, String> {
+fn find_component<'d>(doc: &'d mut DocumentMut, name: &str) -> Result<&'d mut toml_edit::Table, String> {
     let mut names = Vec::new();
     let mut found = None;
     for section in ["spout", "bolt"] {
@@ -103,8 +95,8 @@ fn find_component<'d>(
             }
         }
     }
-    let (section, index) = found
-        .ok_or_else(|| format!("no component named \"{name}\" (components: {})", names.join(", ")))?;
+    let (section, index) =
+        found.ok_or_else(|| format!("no component named \"{name}\" (components: {})", names.join(", ")))?;
     let table = doc
         .get_mut(section)
         .and_then(Item::as_array_of_tables_mut)
@@ -179,9 +171,7 @@ fn set_in_value(slot: &mut Value, path: &[String], value: Value, in_params: bool
 }
 
 fn parse_index(segment: &str, len: usize) -> Result<usize, String> {
-    let index: usize = segment
-        .parse()
-        .map_err(|_| format!("\"{segment}\" must be an index into a list"))?;
+    let index: usize = segment.parse().map_err(|_| format!("\"{segment}\" must be an index into a list"))?;
     if index < len {
         Ok(index)
     } else {

@@ -123,7 +123,9 @@ impl AckTracker {
 
     fn settle(&self, seq: u64, attempt: u32, outcome: Outcome) {
         let mut s = self.lock();
-        let Some(root) = s.roots.get_mut(&seq) else { return };
+        let Some(root) = s.roots.get_mut(&seq) else {
+            return;
+        };
         if root.attempt != attempt || root.outstanding == 0 {
             return;
         }

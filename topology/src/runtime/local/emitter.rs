@@ -7,14 +7,14 @@
 //! target behind the same calls.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use crate::error::EmitError;
 use crate::message::{Message, MessageType, Payload};
 use crate::metrics::TaskStats;
 use crate::runtime::local::acker::{AckTracker, Anchor, Replay};
-use crate::runtime::local::queue::{EdgeQueue, Push};
+use crate::runtime::local::target::Target;
 use crate::tuple::{Source, Tuple};
 
 /// How one subscription picks consumer tasks.
@@ -31,7 +31,7 @@ pub(crate) enum Route {
 #[derive(Debug)]
 pub(crate) struct Subscription {
     pub(crate) route: Route,
-    pub(crate) targets: Vec<Arc<EdgeQueue>>,
+    pub(crate) targets: Vec<Target>,
     pub(crate) next: usize,
 }
 
@@ -49,7 +49,7 @@ pub(crate) struct StreamRoute {
 pub(crate) struct PeerRoute {
     pub(crate) message: MessageType,
     pub(crate) source: Arc<Source>,
-    pub(crate) targets: Vec<Arc<EdgeQueue>>,
+    pub(crate) targets: Vec<Target>,
 }
 
 /// Root creation for a spout with acking.
@@ -134,7 +134,7 @@ impl Emitter {
         let payload: Payload = Arc::new(value);
         let anchor = self.anchor.as_ref().map(|a| Box::new(a.child()));
         self.stats.emitted += 1;
-        deliver(&queue, Tuple { source, payload, anchor }, &self.aborting, &mut self.stats.blocked).await
+        queue.deliver(Tuple { source, payload, anchor }, &self.aborting, &mut self.stats.blocked).await
     }
 
     /// Marks the tuple being executed as failed: its spout (if it acks)
@@ -249,7 +249,7 @@ impl Emitter {
                     payload: payload.clone(),
                     anchor: parent.map(|a| Box::new(a.child())),
                 };
-                deliver(&sub.targets[i], tuple, &self.aborting, &mut self.stats.blocked).await?;
+                sub.targets[i].deliver(tuple, &self.aborting, &mut self.stats.blocked).await?;
             }
         }
         Ok(())
@@ -258,28 +258,5 @@ impl Emitter {
     /// Replays a failed root.
     pub(crate) async fn replay(&mut self, r: Replay) -> Result<(), EmitError> {
         self.emit_payload(r.stream, r.payload, None, Some((r.seq, r.attempt + 1))).await
-    }
-}
-
-async fn deliver(
-    queue: &EdgeQueue,
-    tuple: Tuple,
-    aborting: &AtomicBool,
-    blocked: &mut Duration,
-) -> Result<(), EmitError> {
-    match queue.push(tuple, blocked).await {
-        Push::Queued => Ok(()),
-        Push::Dropped(victim) => {
-            if let Some(a) = victim.anchor {
-                a.fail();
-            }
-            Ok(())
-        }
-        Push::Closed(refused) => {
-            if let Some(a) = refused.anchor {
-                a.fail();
-            }
-            if aborting.load(Ordering::Relaxed) { Err(EmitError::ShuttingDown) } else { Ok(()) }
-        }
     }
 }

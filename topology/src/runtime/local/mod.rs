@@ -14,6 +14,7 @@ pub(crate) mod control;
 pub mod emitter;
 pub(crate) mod erased;
 pub(crate) mod queue;
+pub(crate) mod target;
 pub(crate) mod task;
 
 use std::path::PathBuf;
@@ -35,6 +36,7 @@ use acker::AckTracker;
 use control::{Control, Event, EventKind, Stage};
 use emitter::{Emitter, PeerRoute, Route, SpoutAcking, StreamRoute, Subscription};
 use queue::EdgeQueue;
+use target::Target;
 use task::{BoltTask, SpoutTask, TaskCommon};
 
 /// How often the coordinator looks at the run while it waits.
@@ -58,11 +60,20 @@ pub struct RunOptions {
     pub progress: Option<Arc<Progress>>,
     /// How long an abort waits for tasks to stop. The default is 5 s.
     pub abort_grace: Duration,
+    /// Set it to end the run early and cleanly: spouts are no longer polled,
+    /// then everything in flight is processed and every component finishes,
+    /// as if the sources had ended (Ctrl-C in `squall run`).
+    pub stop: Arc<AtomicBool>,
 }
 
 impl Default for RunOptions {
     fn default() -> Self {
-        RunOptions { out_dir: None, progress: None, abort_grace: Duration::from_secs(5) }
+        RunOptions {
+            out_dir: None,
+            progress: None,
+            abort_grace: Duration::from_secs(5),
+            stop: Arc::new(AtomicBool::new(false)),
+        }
     }
 }
 
@@ -117,8 +128,9 @@ pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunEr
             let name = format!("{}#{t}", planned.spec.name);
             let spawned = match &planned.factory {
                 Factory::Spout(f) => {
-                    let acking = planned.spec.ack.map(|p| (wiring.trackers[c][t].clone().expect("acking"), p));
-                    let task = SpoutTask::new(common, acking, options.progress.clone());
+                    let acking =
+                        planned.spec.ack.map(|p| (wiring.trackers[c][t].clone().expect("acking"), p));
+                    let task = SpoutTask::new(common, acking, options.progress.clone(), options.stop.clone());
                     let f = f.clone();
                     std::thread::Builder::new()
                         .name(name)
@@ -225,7 +237,9 @@ impl Wiring {
         let aborting = Arc::new(AtomicBool::new(false));
         let controls: Vec<Vec<Arc<Control>>> = comps
             .iter()
-            .map(|c| (0..c.spec.parallelism).map(|_| Arc::new(Control::new(Arc::new(Notify::new())))).collect())
+            .map(|c| {
+                (0..c.spec.parallelism).map(|_| Arc::new(Control::new(Arc::new(Notify::new())))).collect()
+            })
             .collect();
         // edge[c][i][t]: queue of input i of component c at task t.
         let edge: Vec<Vec<Vec<Arc<EdgeQueue>>>> = comps
@@ -237,7 +251,13 @@ impl Wiring {
                     .iter()
                     .map(|input| {
                         (0..p.spec.parallelism)
-                            .map(|t| Arc::new(EdgeQueue::new(input.queue, input.policy, controls[c][t].signal.clone())))
+                            .map(|t| {
+                                Arc::new(EdgeQueue::new(
+                                    input.queue,
+                                    input.policy,
+                                    controls[c][t].signal.clone(),
+                                ))
+                            })
                             .collect()
                     })
                     .collect()
@@ -250,7 +270,11 @@ impl Wiring {
                 p.declared.peer.map(|_| {
                     (0..p.spec.parallelism)
                         .map(|t| {
-                            Arc::new(EdgeQueue::new(p.spec.peer_queue, OverflowPolicy::Block, controls[c][t].signal.clone()))
+                            Arc::new(EdgeQueue::new(
+                                p.spec.peer_queue,
+                                OverflowPolicy::Block,
+                                controls[c][t].signal.clone(),
+                            ))
                         })
                         .collect()
                 })
@@ -299,10 +323,13 @@ impl Wiring {
                                         if input.from != p.spec.name || input.stream != decl.name {
                                             continue;
                                         }
-                                        let targets = edge[ci][ii].clone();
+                                        let targets: Vec<Target> =
+                                            edge[ci][ii].iter().cloned().map(Target::Local).collect();
                                         let route = match &input.grouping {
                                             Grouping::Shuffle | Grouping::LocalOrShuffle => Route::RoundRobin,
-                                            Grouping::Fields(f) => Route::Fields(static_fields(decl.message.fields(), f)),
+                                            Grouping::Fields(f) => {
+                                                Route::Fields(static_fields(decl.message.fields(), f))
+                                            }
                                             Grouping::All => Route::All,
                                             Grouping::Global => Route::Global,
                                             Grouping::Direct => Route::Direct,
@@ -328,7 +355,7 @@ impl Wiring {
                         let peers = p.declared.peer.map(|message| PeerRoute {
                             message,
                             source: Arc::new(Source::Peer { task: t }),
-                            targets: peer[c].clone().expect("peer queues exist when declared"),
+                            targets: peer[c].iter().flatten().cloned().map(Target::Local).collect(),
                         });
                         let acking = p.spec.ack.map(|a| SpoutAcking {
                             tracker: trackers[c][t].clone().expect("tracker exists when acking"),
@@ -400,7 +427,11 @@ impl<'a> Coordinator<'a> {
         Coordinator {
             topology,
             wiring,
-            spouts_running: comps.iter().filter(|c| c.spec.role == Role::Spout).map(|c| c.spec.parallelism).sum(),
+            spouts_running: comps
+                .iter()
+                .filter(|c| c.spec.role == Role::Spout)
+                .map(|c| c.spec.parallelism)
+                .sum(),
             finished: vec![0; comps.len()],
             exited: 0,
             tasks: comps.iter().map(|c| c.spec.parallelism).sum(),

@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
 use std::time::{Duration, Instant};
 
@@ -121,7 +121,12 @@ impl BoltTask {
     /// Executes one tuple. `clock` is when the previous step ended (one
     /// clock read per tuple: consecutive executes share their boundary);
     /// returns when this one ended.
-    async fn execute<B: Bolt>(&mut self, bolt: &mut B, mut tuple: Tuple, clock: Instant) -> Result<Instant, BoxError> {
+    async fn execute<B: Bolt>(
+        &mut self,
+        bolt: &mut B,
+        mut tuple: Tuple,
+        clock: Instant,
+    ) -> Result<Instant, BoxError> {
         let out = &mut self.common.emitter;
         out.anchor = tuple.anchor.take();
         out.input_failed = false;
@@ -203,6 +208,7 @@ pub(crate) struct SpoutTask {
     pub(crate) common: TaskCommon,
     pub(crate) acking: Option<(Arc<AckTracker>, AckPolicy)>,
     pub(crate) progress: Option<Arc<Progress>>,
+    stop: Arc<AtomicBool>,
     exhausted: bool,
     reported_done: bool,
     settled: Vec<(u64, Outcome, Option<Replay>)>,
@@ -214,11 +220,13 @@ impl SpoutTask {
         common: TaskCommon,
         acking: Option<(Arc<AckTracker>, AckPolicy)>,
         progress: Option<Arc<Progress>>,
+        stop: Arc<AtomicBool>,
     ) -> Self {
         SpoutTask {
             common,
             acking,
             progress,
+            stop,
             exhausted: false,
             reported_done: false,
             settled: Vec::new(),
@@ -228,7 +236,9 @@ impl SpoutTask {
 
     /// Acks, fails and replays what settled; returns the roots still open.
     async fn settle<S: Spout>(&mut self, spout: &mut S) -> Result<usize, BoxError> {
-        let Some((tracker, policy)) = self.acking.clone() else { return Ok(0) };
+        let Some((tracker, policy)) = self.acking.clone() else {
+            return Ok(0);
+        };
         let now = Instant::now();
         if now.duration_since(self.last_expiry) >= ACK_POLL {
             tracker.expire(now);
@@ -276,6 +286,9 @@ pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Res
             return Ok(());
         }
         let pending = t.settle(spout).await?;
+        if t.stop.load(Ordering::Relaxed) {
+            t.exhausted = true;
+        }
         let max_pending = t.acking.as_ref().map_or(usize::MAX, |(_, p)| p.max_pending);
         let signal = t.common.control.signal.clone();
         if !t.exhausted && pending < max_pending {
