@@ -14,7 +14,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use squall::topology::metrics::CustomMetric;
 use squall::topology::{RunOptions, RunReport, Topology, TopologySpec};
 
-const MESSAGES: u64 = 400_000;
+const MESSAGES: u64 = 1_000_000;
 
 fn topology(parallelism: usize, count: u64, rate_hz: Option<f64>) -> Topology {
     let rate = rate_hz.map_or(String::new(), |r| format!(", rate_hz = {r}"));

@@ -1,12 +1,13 @@
 //! The unit a bolt receives.
 
-use std::sync::Arc;
+use std::collections::HashSet;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::message::Payload;
 use crate::runtime::local::acker::Anchor;
 
 /// Where a tuple came from.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub enum Source {
     /// A subscribed stream of another component.
     Stream {
@@ -27,7 +28,7 @@ pub enum Source {
 /// A message delivered to a bolt, with where it came from.
 #[derive(Debug)]
 pub struct Tuple {
-    pub(crate) source: Arc<Source>,
+    pub(crate) source: &'static Source,
     pub(crate) payload: Payload,
     /// Boxed: only spouts with acking have anchors, and a small tuple moves
     /// faster through the queues.
@@ -59,29 +60,46 @@ impl Tuple {
 
     /// Where the tuple came from.
     pub fn source(&self) -> &Source {
-        &self.source
+        self.source
     }
 
     /// The producing component's name (`None` for peer messages).
     pub fn source_component(&self) -> Option<&str> {
-        match &*self.source {
-            Source::Stream { component, .. } => Some(component),
+        match self.source {
+            Source::Stream { component, .. } => Some(&**component),
             Source::Peer { .. } => None,
         }
     }
 
     /// The stream's name (`None` for peer messages).
     pub fn stream(&self) -> Option<&str> {
-        match &*self.source {
-            Source::Stream { stream, .. } => Some(stream),
+        match self.source {
+            Source::Stream { stream, .. } => Some(&**stream),
             Source::Peer { .. } => None,
         }
     }
 
     /// The index of the task that sent it.
     pub fn source_task(&self) -> usize {
-        match &*self.source {
+        match self.source {
             Source::Stream { task, .. } | Source::Peer { task } => *task,
         }
+    }
+}
+
+impl Source {
+    /// The process-wide copy of this source. Tuples refer to their source by
+    /// a plain reference, so no reference count shared by two cores is
+    /// touched per tuple. Distinct sources are few (components × streams ×
+    /// tasks, by name) and repeated runs reuse them, so the table stays small.
+    pub(crate) fn interned(self) -> &'static Source {
+        static TABLE: OnceLock<Mutex<HashSet<&'static Source>>> = OnceLock::new();
+        let mut table = TABLE.get_or_init(Default::default).lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(existing) = table.get(&self) {
+            return existing;
+        }
+        let leaked: &'static Source = Box::leak(Box::new(self));
+        table.insert(leaked);
+        leaked
     }
 }

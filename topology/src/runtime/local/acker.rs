@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use tokio::sync::Notify;
+use crate::runtime::local::control::TaskSignal;
 
 use crate::message::Payload;
 
@@ -41,7 +41,7 @@ struct State {
 #[derive(Debug)]
 pub(crate) struct AckTracker {
     state: Mutex<State>,
-    spout: Arc<Notify>,
+    spout: Arc<TaskSignal>,
 }
 
 /// A tuple's link to its root; dropped without `complete`/`fail` it does
@@ -63,7 +63,7 @@ pub(crate) struct Replay {
 }
 
 impl AckTracker {
-    pub(crate) fn new(spout: Arc<Notify>) -> Arc<Self> {
+    pub(crate) fn new(spout: Arc<TaskSignal>) -> Arc<Self> {
         Arc::new(AckTracker { state: Mutex::new(State::default()), spout })
     }
 
@@ -140,7 +140,7 @@ impl AckTracker {
         }
         s.finished.push((seq, outcome));
         drop(s);
-        self.spout.notify_one();
+        self.spout.wake();
     }
 }
 
@@ -173,7 +173,7 @@ mod tests {
     use std::time::Duration;
 
     fn tracker() -> Arc<AckTracker> {
-        AckTracker::new(Arc::new(Notify::new()))
+        AckTracker::new(Arc::new(TaskSignal::default()))
     }
 
     fn finished(t: &AckTracker) -> Vec<(u64, Outcome)> {

@@ -21,6 +21,49 @@ pub(crate) enum Stage {
     Abort = 4,
 }
 
+/// Wakes one task's thread.
+///
+/// Producers wake a consumer only when it has announced that it is parking,
+/// so the steady state costs a plain load per tuple instead of a shared
+/// atomic write. The flag is read under the queue lock and set before the
+/// consumer re-checks its queues under the same locks, so a wake-up cannot
+/// be missed.
+#[derive(Debug, Default)]
+pub(crate) struct TaskSignal {
+    notify: Notify,
+    parked: AtomicBool,
+}
+
+impl TaskSignal {
+    /// Wakes the task unconditionally (commands, acks); a wake-up sent while
+    /// it runs is kept for its next wait.
+    pub(crate) fn wake(&self) {
+        self.notify.notify_one();
+    }
+
+    /// Whether the task has announced that it is parking. Read it under the
+    /// lock of the queue just pushed to.
+    pub(crate) fn is_parking(&self) -> bool {
+        self.parked.load(Ordering::Relaxed)
+    }
+
+    /// Announces that the task is about to park; it must re-check its queues
+    /// after this and before [`wait`](Self::wait).
+    pub(crate) fn announce_park(&self) {
+        self.parked.store(true, Ordering::SeqCst);
+    }
+
+    /// Withdraws the announcement (the task found work or woke up).
+    pub(crate) fn unpark(&self) {
+        self.parked.store(false, Ordering::Relaxed);
+    }
+
+    /// Resolves on the next wake-up (or at once if one is pending).
+    pub(crate) fn wait(&self) -> tokio::sync::futures::Notified<'_> {
+        self.notify.notified()
+    }
+}
+
 /// The coordinator's side of one task.
 #[derive(Debug)]
 pub(crate) struct Control {
@@ -28,11 +71,11 @@ pub(crate) struct Control {
     /// The task is inside `tick` (shutdown waits for it).
     pub(crate) ticking: AtomicBool,
     /// Wakes the task.
-    pub(crate) signal: Arc<Notify>,
+    pub(crate) signal: Arc<TaskSignal>,
 }
 
 impl Control {
-    pub(crate) fn new(signal: Arc<Notify>) -> Self {
+    pub(crate) fn new(signal: Arc<TaskSignal>) -> Self {
         Control { stage: AtomicU8::new(Stage::Run as u8), ticking: AtomicBool::new(false), signal }
     }
 
@@ -49,7 +92,7 @@ impl Control {
     /// Moves the task forward to `stage` (never back) and wakes it.
     pub(crate) fn advance(&self, stage: Stage) {
         self.stage.fetch_max(stage as u8, Ordering::SeqCst);
-        self.signal.notify_one();
+        self.signal.wake();
     }
 }
 

@@ -40,7 +40,7 @@ pub(crate) struct Subscription {
 pub(crate) struct StreamRoute {
     pub(crate) name: Arc<str>,
     pub(crate) message: MessageType,
-    pub(crate) source: Arc<Source>,
+    pub(crate) source: &'static Source,
     pub(crate) subscriptions: Vec<Subscription>,
 }
 
@@ -48,7 +48,7 @@ pub(crate) struct StreamRoute {
 #[derive(Debug)]
 pub(crate) struct PeerRoute {
     pub(crate) message: MessageType,
-    pub(crate) source: Arc<Source>,
+    pub(crate) source: &'static Source,
     pub(crate) targets: Vec<Target>,
 }
 
@@ -130,7 +130,7 @@ impl Emitter {
         }
         let count = peers.targets.len();
         let queue = peers.targets.get(task).ok_or(EmitError::NoSuchTask { task, count })?.clone();
-        let source = peers.source.clone();
+        let source = peers.source;
         let payload: Payload = Arc::new(value);
         let anchor = self.anchor.as_ref().map(|a| Box::new(a.child()));
         self.stats.emitted += 1;
@@ -199,7 +199,7 @@ impl Emitter {
         if replay.is_none() {
             self.stats.emitted += 1;
         }
-        let result = self.route(index, &payload, direct, root.as_ref()).await;
+        let result = self.route(index, payload, direct, root.as_ref()).await;
         if let Some(root) = root {
             match result {
                 Ok(()) => root.complete(),
@@ -212,7 +212,7 @@ impl Emitter {
     async fn route(
         &mut self,
         index: usize,
-        payload: &Payload,
+        payload: Payload,
         direct: Option<usize>,
         root: Option<&Anchor>,
     ) -> Result<(), EmitError> {
@@ -221,8 +221,13 @@ impl Emitter {
         if direct.is_none() && stream.subscriptions.iter().any(|s| matches!(s.route, Route::Direct)) {
             return Err(EmitError::DirectNeedsTask(stream.name.to_string()));
         }
-        for sub in &mut stream.subscriptions {
+        // The payload is moved into the last delivery rather than cloned and
+        // then dropped here: one reference-count round trip less per tuple.
+        let mut payload = Some(payload);
+        let subscriptions = stream.subscriptions.len();
+        for (k, sub) in stream.subscriptions.iter_mut().enumerate() {
             let n = sub.targets.len();
+            let shared = payload.as_ref().expect("present until the last delivery");
             let targets = match &sub.route {
                 Route::RoundRobin => {
                     let i = sub.next;
@@ -230,7 +235,7 @@ impl Emitter {
                     i..i + 1
                 }
                 Route::Fields(fields) => {
-                    let i = (stream.message.hash_fields(&**payload, fields)? % n as u64) as usize;
+                    let i = (stream.message.hash_fields(&**shared, fields)? % n as u64) as usize;
                     i..i + 1
                 }
                 Route::Global => 0..1,
@@ -243,12 +248,15 @@ impl Emitter {
                 }
                 Route::All => 0..n,
             };
+            let last = targets.end - 1;
             for i in targets {
-                let tuple = Tuple {
-                    source: stream.source.clone(),
-                    payload: payload.clone(),
-                    anchor: parent.map(|a| Box::new(a.child())),
+                let payload = if k + 1 == subscriptions && i == last {
+                    payload.take().expect("taken once")
+                } else {
+                    payload.as_ref().expect("present until the last delivery").clone()
                 };
+                let tuple =
+                    Tuple { source: stream.source, payload, anchor: parent.map(|a| Box::new(a.child())) };
                 sub.targets[i].deliver(tuple, &self.aborting, &mut self.stats.blocked).await?;
             }
         }

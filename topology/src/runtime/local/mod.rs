@@ -24,8 +24,6 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use tokio::sync::Notify;
-
 use crate::context::TaskContext;
 use crate::grouping::{Grouping, OverflowPolicy};
 use crate::metrics::{RunReport, TaskOutcome, component_report};
@@ -33,7 +31,7 @@ use crate::plan::{Factory, Topology};
 use crate::spec::Role;
 use crate::tuple::Source;
 use acker::AckTracker;
-use control::{Control, Event, EventKind, Stage};
+use control::{Control, Event, EventKind, Stage, TaskSignal};
 use emitter::{Emitter, PeerRoute, Route, SpoutAcking, StreamRoute, Subscription};
 use queue::EdgeQueue;
 use target::Target;
@@ -238,7 +236,9 @@ impl Wiring {
         let controls: Vec<Vec<Arc<Control>>> = comps
             .iter()
             .map(|c| {
-                (0..c.spec.parallelism).map(|_| Arc::new(Control::new(Arc::new(Notify::new())))).collect()
+                (0..c.spec.parallelism)
+                    .map(|_| Arc::new(Control::new(Arc::new(TaskSignal::default()))))
+                    .collect()
             })
             .collect();
         // edge[c][i][t]: queue of input i of component c at task t.
@@ -343,18 +343,19 @@ impl Wiring {
                                 StreamRoute {
                                     name: name.clone(),
                                     message: decl.message,
-                                    source: Arc::new(Source::Stream {
+                                    source: Source::Stream {
                                         component: component.clone(),
                                         stream: name,
                                         task: t,
-                                    }),
+                                    }
+                                    .interned(),
                                     subscriptions,
                                 }
                             })
                             .collect();
                         let peers = p.declared.peer.map(|message| PeerRoute {
                             message,
-                            source: Arc::new(Source::Peer { task: t }),
+                            source: Source::Peer { task: t }.interned(),
                             targets: peer[c].iter().flatten().cloned().map(Target::Local).collect(),
                         });
                         let acking = p.spec.ack.map(|a| SpoutAcking {

@@ -14,6 +14,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use tokio::sync::Notify;
 
+use crate::runtime::local::control::TaskSignal;
+
 use crate::grouping::OverflowPolicy;
 use crate::tuple::Tuple;
 
@@ -60,13 +62,13 @@ pub(crate) struct EdgeQueue {
     capacity: usize,
     policy: OverflowPolicy,
     room: Notify,
-    consumer: Arc<Notify>,
+    consumer: Arc<TaskSignal>,
     pub(crate) counters: QueueCounters,
 }
 
 impl EdgeQueue {
     /// A queue that wakes `consumer` when it stops being empty.
-    pub(crate) fn new(capacity: usize, policy: OverflowPolicy, consumer: Arc<Notify>) -> Self {
+    pub(crate) fn new(capacity: usize, policy: OverflowPolicy, consumer: Arc<TaskSignal>) -> Self {
         assert!(capacity > 0, "queue capacity must be positive");
         EdgeQueue {
             state: Mutex::new(State::default()),
@@ -139,9 +141,10 @@ impl EdgeQueue {
         s.accepted += 1;
         let depth = s.buf.len() + s.taken;
         s.max_depth = s.max_depth.max(depth);
+        let wake = was_empty && self.consumer.is_parking();
         drop(s);
-        if was_empty {
-            self.consumer.notify_one();
+        if wake {
+            self.consumer.wake();
         }
         match victim {
             Some(v) => Push::Dropped(v),
@@ -215,7 +218,7 @@ mod tests {
     use crate::tuple::Source;
 
     fn tuple(i: u64) -> Tuple {
-        Tuple { source: Arc::new(Source::Peer { task: 0 }), payload: Arc::new(i), anchor: None }
+        Tuple { source: Source::Peer { task: 0 }.interned(), payload: Arc::new(i), anchor: None }
     }
 
     fn value(t: &Tuple) -> u64 {
@@ -228,7 +231,7 @@ mod tests {
 
     #[test]
     fn drop_oldest_keeps_the_newest_and_counts() {
-        let q = EdgeQueue::new(3, OverflowPolicy::DropOldest, Arc::new(Notify::new()));
+        let q = EdgeQueue::new(3, OverflowPolicy::DropOldest, Arc::new(TaskSignal::default()));
         let mut evicted = Vec::new();
         run(async {
             for i in 0..10 {
@@ -246,7 +249,7 @@ mod tests {
 
     #[test]
     fn drop_newest_refuses_arrivals() {
-        let q = EdgeQueue::new(2, OverflowPolicy::DropNewest, Arc::new(Notify::new()));
+        let q = EdgeQueue::new(2, OverflowPolicy::DropNewest, Arc::new(TaskSignal::default()));
         run(async {
             for i in 0..5 {
                 q.push(tuple(i), &mut Default::default()).await;
@@ -260,7 +263,7 @@ mod tests {
 
     #[test]
     fn block_counts_taken_tuples_against_the_bound() {
-        let q = Arc::new(EdgeQueue::new(2, OverflowPolicy::Block, Arc::new(Notify::new())));
+        let q = Arc::new(EdgeQueue::new(2, OverflowPolicy::Block, Arc::new(TaskSignal::default())));
         let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_time().build().unwrap();
         rt.block_on(async {
             q.push(tuple(0), &mut Default::default()).await;
@@ -280,7 +283,7 @@ mod tests {
 
     #[test]
     fn close_discards_and_refuses() {
-        let q = EdgeQueue::new(4, OverflowPolicy::Block, Arc::new(Notify::new()));
+        let q = EdgeQueue::new(4, OverflowPolicy::Block, Arc::new(TaskSignal::default()));
         run(async {
             q.push(tuple(0), &mut Default::default()).await;
             assert_eq!(q.close().len(), 1);

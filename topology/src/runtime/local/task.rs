@@ -190,15 +190,21 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
             continue;
         }
         let signal = t.common.control.signal.clone();
+        signal.announce_park();
+        if t.take_batch() {
+            signal.unpark();
+            continue;
+        }
         match next_tick.filter(|_| stage < Stage::Drain) {
             Some(due) => {
                 tokio::select! {
-                    () = signal.notified() => {}
+                    () = signal.wait() => {}
                     () = tokio::time::sleep_until(due.into()) => {}
                 }
             }
-            None => signal.notified().await,
+            None => signal.wait().await,
         }
+        signal.unpark();
     }
 }
 
@@ -311,9 +317,9 @@ pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Res
             t.reported_done = true;
             t.common.report(EventKind::SpoutDone);
         } else if pending > 0 {
-            let _ = tokio::time::timeout(ACK_POLL, signal.notified()).await;
+            let _ = tokio::time::timeout(ACK_POLL, signal.wait()).await;
         } else {
-            signal.notified().await;
+            signal.wait().await;
         }
     }
 }
