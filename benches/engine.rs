@@ -4,10 +4,9 @@
 //!     cargo bench --bench engine
 //!
 //! `throughput/p{1,2}`: one million messages per iteration through the three
-//! stages, with
-//! the relay and sink at parallelism 1 and 2. `latency`: the source paced at
-//! half the measured maximum rate; end-to-end latency p50/p99 (sink receive
-//! time − emit time), median of five runs, printed as a table.
+//! stages, with the relay and sink at parallelism 1 and 2. `latency`: the
+//! source paced at half the measured maximum rate; end-to-end latency p50/p99
+//! (sink receive time − emit time), median of five runs, printed as a table.
 
 use std::time::Duration;
 

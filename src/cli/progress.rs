@@ -26,7 +26,7 @@ impl ProgressDisplay {
         let thread = std::thread::spawn(move || {
             let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr_with_hz(10));
             let with_total = ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} tuples from spouts ({per_sec}, eta {eta})",
+                "{spinner} [{elapsed_precise}] {bar:40} {human_pos}/{human_len} tuples from spouts ({msg}, eta {eta})",
             )
             .expect("valid template");
             let open_ended = ProgressStyle::with_template(
@@ -40,7 +40,9 @@ impl ProgressDisplay {
                     bar.set_length(expected);
                     bar.set_style(with_total.clone());
                 }
-                bar.set_position(progress.emitted.load(Ordering::Relaxed));
+                let emitted = progress.emitted.load(Ordering::Relaxed);
+                bar.set_position(emitted);
+                bar.set_message(rate(emitted, bar.elapsed()));
                 std::thread::sleep(Duration::from_millis(100));
             }
             bar.finish_and_clear();
@@ -54,5 +56,17 @@ impl ProgressDisplay {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+    }
+}
+
+/// "2.56 M/s"-style rate.
+fn rate(count: u64, elapsed: Duration) -> String {
+    let per_sec = count as f64 / elapsed.as_secs_f64().max(1e-9);
+    if per_sec >= 1e6 {
+        format!("{:.2} M/s", per_sec / 1e6)
+    } else if per_sec >= 1e3 {
+        format!("{:.1} k/s", per_sec / 1e3)
+    } else {
+        format!("{per_sec:.0}/s")
     }
 }
