@@ -279,17 +279,19 @@ fn direct_subscriber_rejects_an_emit_without_task() {
     assert!(message.contains("direct subscriber"), "{message}");
 }
 
+/// A fast spout feeding one bolt that sleeps `delay_us` per tuple through a
+/// `queue`-slot queue with `policy`.
+fn slow_bolt(count: u64, queue: usize, policy: &str, delay_us: u64) -> String {
+    two_stage(count, &format!(r#"grouping = "shuffle", queue = {queue}, policy = "{policy}""#), 1, "")
+        .replace("kind = \"recorder\"", &format!("kind = \"recorder\"\nparams = {{ delay_us = {delay_us} }}"))
+}
+
 #[test]
 fn block_bounds_in_flight_and_slows_the_spout() {
     let h = Harness::new();
     let count = 200;
     let started = Instant::now();
-    let report = h
-        .run(
-            &two_stage(count, r#"grouping = "shuffle", queue = 4, policy = "block""#, 1, "")
-                .replace("kind = \"recorder\"", "kind = \"recorder\"\nparams = { delay_us = 1000 }"),
-        )
-        .unwrap();
+    let report = h.run(&slow_bolt(count, 4, "block", 1000)).unwrap();
     let elapsed = started.elapsed();
     assert!(
         h.in_flight_max.load(Ordering::SeqCst) <= 4,
@@ -309,12 +311,7 @@ fn block_bounds_in_flight_and_slows_the_spout() {
 fn drop_oldest_keeps_newest_and_counts_exactly() {
     let h = Harness::new();
     let count = 500;
-    let report = h
-        .run(
-            &two_stage(count, r#"grouping = "shuffle", queue = 2, policy = "drop_oldest""#, 1, "")
-                .replace("kind = \"recorder\"", "kind = \"recorder\"\nparams = { delay_us = 200 }"),
-        )
-        .unwrap();
+    let report = h.run(&slow_bolt(count, 2, "drop_oldest", 200)).unwrap();
     let seen = &h.per_task("b")[&0];
     let b = report.component("b").unwrap();
     assert!(b.dropped > 0, "a slow bolt behind a 2-slot queue must drop");
@@ -328,12 +325,7 @@ fn drop_oldest_keeps_newest_and_counts_exactly() {
 fn drop_newest_counts_exactly() {
     let h = Harness::new();
     let count = 500;
-    let report = h
-        .run(
-            &two_stage(count, r#"grouping = "shuffle", queue = 2, policy = "drop_newest""#, 1, "")
-                .replace("kind = \"recorder\"", "kind = \"recorder\"\nparams = { delay_us = 200 }"),
-        )
-        .unwrap();
+    let report = h.run(&slow_bolt(count, 2, "drop_newest", 200)).unwrap();
     let b = report.component("b").unwrap();
     assert!(b.dropped > 0);
     assert_eq!(b.received + b.dropped, count);

@@ -240,6 +240,10 @@ fn convert_component(
         Some(q) => positive(q, "peer_queue", at, source, errors).unwrap_or(1),
     };
     let tick = comp.tick_secs.as_ref().and_then(|t| {
+        if role == Role::Spout {
+            errors.push(source.error(t.span().start, at, "tick_secs is a bolt setting (spouts are polled)"));
+            return None;
+        }
         let secs = *t.get_ref();
         if secs.is_finite() && secs > 0.0 {
             Some(Duration::from_secs_f64(secs))
