@@ -1,0 +1,154 @@
+//! Watches a run and shuts it down in order.
+//!
+//! When every spout task is exhausted it stops the ticks and waits for
+//! quiescence (every tuple accepted by any queue resolved, read twice with
+//! equal totals); then it finishes components one at a time in dependency
+//! order: finish, quiescence again, exit. On a failure it aborts every task.
+
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use crate::plan::Topology;
+use crate::runtime::local::control::{Event, EventKind, Stage};
+use crate::runtime::local::wiring::Wiring;
+use crate::spec::Role;
+
+/// How often the coordinator looks at the run while it waits.
+const POLL: Duration = Duration::from_millis(1);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Running,
+    Draining,
+    Finishing(usize),
+    Exiting,
+}
+
+pub(crate) struct Coordinator<'a> {
+    topology: &'a Topology,
+    wiring: &'a Wiring,
+    spouts_running: usize,
+    finished: Vec<usize>,
+    exited: usize,
+    tasks: usize,
+    last_scan: Option<(u64, u64)>,
+}
+
+impl<'a> Coordinator<'a> {
+    pub(crate) fn new(topology: &'a Topology, wiring: &'a Wiring) -> Self {
+        let comps = &topology.components;
+        Coordinator {
+            topology,
+            wiring,
+            spouts_running: comps
+                .iter()
+                .filter(|c| c.spec.role == Role::Spout)
+                .map(|c| c.spec.parallelism)
+                .sum(),
+            finished: vec![0; comps.len()],
+            exited: 0,
+            tasks: comps.iter().map(|c| c.spec.parallelism).sum(),
+            last_scan: None,
+        }
+    }
+
+    fn advance(&self, component: usize, stage: Stage) {
+        for control in &self.wiring.controls[component] {
+            control.advance(stage);
+        }
+    }
+
+    /// True when all queues have resolved everything they accepted, no tick
+    /// is running, and the totals equal those of the previous look.
+    fn quiescent(&mut self) -> bool {
+        let ticking = self.wiring.controls.iter().flatten().any(|c| c.ticking.load(Ordering::SeqCst));
+        let (mut accepted, mut resolved) = (0, 0);
+        for q in self.wiring.all_queues() {
+            let (a, r) = q.totals();
+            accepted += a;
+            resolved += r;
+        }
+        let scan = (accepted, resolved);
+        let stable = !ticking && accepted == resolved && self.last_scan == Some(scan);
+        self.last_scan = if ticking { None } else { Some(scan) };
+        stable
+    }
+
+    /// Runs the shutdown protocol; returns the first failure, if any.
+    pub(crate) fn drive(
+        mut self,
+        events: &mpsc::Receiver<Event>,
+        grace: Duration,
+    ) -> Option<(usize, usize, String)> {
+        let order = &self.topology.order;
+        let mut phase = Phase::Running;
+        loop {
+            match events.recv_timeout(POLL) {
+                Ok(Event { component, task, kind }) => match kind {
+                    EventKind::SpoutDone => self.spouts_running -= 1,
+                    EventKind::Finished => self.finished[component] += 1,
+                    EventKind::Exited => self.exited += 1,
+                    EventKind::Failed(message) => {
+                        self.abort(events, grace);
+                        return Some((component, task, message));
+                    }
+                },
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => return None,
+            }
+            phase = match phase {
+                Phase::Running if self.spouts_running == 0 => {
+                    for c in 0..self.topology.components.len() {
+                        self.advance(c, Stage::Drain);
+                    }
+                    self.last_scan = None;
+                    Phase::Draining
+                }
+                Phase::Draining if self.quiescent() => {
+                    self.advance(order[0], Stage::Finish);
+                    Phase::Finishing(0)
+                }
+                Phase::Finishing(i) => {
+                    let c = order[i];
+                    if self.finished[c] == self.topology.components[c].spec.parallelism && self.quiescent() {
+                        self.advance(c, Stage::Exit);
+                        self.last_scan = None;
+                        if i + 1 < order.len() {
+                            self.advance(order[i + 1], Stage::Finish);
+                            Phase::Finishing(i + 1)
+                        } else {
+                            Phase::Exiting
+                        }
+                    } else {
+                        phase
+                    }
+                }
+                Phase::Exiting if self.exited == self.tasks => return None,
+                other => other,
+            };
+        }
+    }
+
+    fn abort(&mut self, events: &mpsc::Receiver<Event>, grace: Duration) {
+        self.wiring.aborting.store(true, Ordering::SeqCst);
+        for c in 0..self.topology.components.len() {
+            self.advance(c, Stage::Abort);
+        }
+        for q in self.wiring.all_queues() {
+            for t in q.close() {
+                if let Some(a) = t.anchor {
+                    a.fail();
+                }
+            }
+        }
+        let deadline = Instant::now() + grace;
+        while self.exited < self.tasks {
+            match events.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                Ok(Event { kind: EventKind::Exited, .. }) => self.exited += 1,
+                Ok(_) => {}
+                Err(_) => break,
+            }
+        }
+    }
+}

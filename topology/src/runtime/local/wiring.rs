@@ -1,0 +1,205 @@
+//! Builds every task's queues, routes and emitter before the threads start.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use crate::context::TaskContext;
+use crate::grouping::{Grouping, OverflowPolicy};
+use crate::plan::Topology;
+use crate::runtime::local::acker::AckTracker;
+use crate::runtime::local::control::{Control, TaskSignal};
+use crate::runtime::local::emitter::{Emitter, PeerRoute, Route, SpoutAcking, StreamRoute, Subscription};
+use crate::runtime::local::queue::EdgeQueue;
+use crate::runtime::local::target::Target;
+use crate::runtime::local::{Progress, RunOptions};
+use crate::tuple::Source;
+
+/// Queues, controls and emitters of every task, before the threads start.
+pub(crate) struct Wiring {
+    pub(crate) controls: Vec<Vec<Arc<Control>>>,
+    /// `inboxes[c][t]`: the input queues of task t (inputs in file order,
+    /// then the peer queue).
+    pub(crate) inboxes: Vec<Vec<Vec<Arc<EdgeQueue>>>>,
+    pub(crate) emitters: Vec<Vec<Option<Emitter>>>,
+    pub(crate) trackers: Vec<Vec<Option<Arc<AckTracker>>>>,
+    pub(crate) aborting: Arc<AtomicBool>,
+    topology_name: Arc<str>,
+    out_dir: Option<Arc<PathBuf>>,
+    progress: Option<Arc<Progress>>,
+}
+
+impl Wiring {
+    pub(crate) fn build(topology: &Topology, options: &RunOptions) -> Self {
+        let comps = &topology.components;
+        let aborting = Arc::new(AtomicBool::new(false));
+        let controls: Vec<Vec<Arc<Control>>> = comps
+            .iter()
+            .map(|c| {
+                (0..c.spec.parallelism)
+                    .map(|_| Arc::new(Control::new(Arc::new(TaskSignal::default()))))
+                    .collect()
+            })
+            .collect();
+        // edge[c][i][t]: queue of input i of component c at task t.
+        let edge: Vec<Vec<Vec<Arc<EdgeQueue>>>> = comps
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                p.spec
+                    .inputs
+                    .iter()
+                    .map(|input| {
+                        (0..p.spec.parallelism)
+                            .map(|t| {
+                                Arc::new(EdgeQueue::new(
+                                    input.queue,
+                                    input.policy,
+                                    controls[c][t].signal.clone(),
+                                ))
+                            })
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let peer: Vec<Option<Vec<Arc<EdgeQueue>>>> = comps
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                p.declared.peer.map(|_| {
+                    (0..p.spec.parallelism)
+                        .map(|t| {
+                            Arc::new(EdgeQueue::new(
+                                p.spec.peer_queue,
+                                OverflowPolicy::Block,
+                                controls[c][t].signal.clone(),
+                            ))
+                        })
+                        .collect()
+                })
+            })
+            .collect();
+        let inboxes = comps
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                (0..p.spec.parallelism)
+                    .map(|t| {
+                        let mut inbox: Vec<Arc<EdgeQueue>> = edge[c].iter().map(|q| q[t].clone()).collect();
+                        if let Some(peers) = &peer[c] {
+                            inbox.push(peers[t].clone());
+                        }
+                        inbox
+                    })
+                    .collect()
+            })
+            .collect();
+        let trackers: Vec<Vec<Option<Arc<AckTracker>>>> = comps
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                (0..p.spec.parallelism)
+                    .map(|t| p.spec.ack.map(|_| AckTracker::new(controls[c][t].signal.clone())))
+                    .collect()
+            })
+            .collect();
+        let emitters = comps
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                (0..p.spec.parallelism)
+                    .map(|t| {
+                        let component: Arc<str> = p.spec.name.as_str().into();
+                        let streams = p
+                            .declared
+                            .outputs()
+                            .iter()
+                            .map(|decl| {
+                                let name: Arc<str> = decl.name.as_str().into();
+                                let mut subscriptions = Vec::new();
+                                for (ci, consumer) in comps.iter().enumerate() {
+                                    for (ii, input) in consumer.spec.inputs.iter().enumerate() {
+                                        if input.from != p.spec.name || input.stream != decl.name {
+                                            continue;
+                                        }
+                                        let targets: Vec<Target> =
+                                            edge[ci][ii].iter().cloned().map(Target::Local).collect();
+                                        let route = match &input.grouping {
+                                            Grouping::Shuffle | Grouping::LocalOrShuffle => Route::RoundRobin,
+                                            Grouping::Fields(f) => {
+                                                Route::Fields(static_fields(decl.message.fields(), f))
+                                            }
+                                            Grouping::All => Route::All,
+                                            Grouping::Global => Route::Global,
+                                            Grouping::Direct => Route::Direct,
+                                        };
+                                        // Producer tasks start their round-robin at different
+                                        // consumers so that they do not move in lockstep.
+                                        let next = t % targets.len();
+                                        subscriptions.push(Subscription { route, targets, next });
+                                    }
+                                }
+                                StreamRoute {
+                                    name: name.clone(),
+                                    message: decl.message,
+                                    source: Source::Stream {
+                                        component: component.clone(),
+                                        stream: name,
+                                        task: t,
+                                    }
+                                    .interned(),
+                                    subscriptions,
+                                }
+                            })
+                            .collect();
+                        let peers = p.declared.peer.map(|message| PeerRoute {
+                            message,
+                            source: Source::Peer { task: t }.interned(),
+                            targets: peer[c].iter().flatten().cloned().map(Target::Local).collect(),
+                        });
+                        let acking = p.spec.ack.map(|a| SpoutAcking {
+                            tracker: trackers[c][t].clone().expect("tracker exists when acking"),
+                            timeout: a.timeout,
+                        });
+                        Some(Emitter::new(t, streams, peers, acking, aborting.clone()))
+                    })
+                    .collect()
+            })
+            .collect();
+        Wiring {
+            controls,
+            inboxes,
+            emitters,
+            trackers,
+            aborting,
+            topology_name: topology.spec.name.as_str().into(),
+            out_dir: options.out_dir.clone().map(Arc::new),
+            progress: options.progress.clone(),
+        }
+    }
+
+    pub(crate) fn context(&self, topology: &Topology, c: usize, t: usize) -> TaskContext {
+        let spec = &topology.components[c].spec;
+        TaskContext {
+            topology: self.topology_name.clone(),
+            component: spec.name.as_str().into(),
+            task_index: t,
+            task_count: spec.parallelism,
+            seed: topology.spec.seed,
+            out_dir: self.out_dir.clone(),
+            progress: self.progress.clone(),
+        }
+    }
+
+    pub(crate) fn all_queues(&self) -> impl Iterator<Item = &Arc<EdgeQueue>> {
+        self.inboxes.iter().flatten().flatten()
+    }
+}
+
+/// The grouping field names as the type's own `'static` names (validation
+/// has checked they exist).
+fn static_fields(declared: Option<&'static [&'static str]>, wanted: &[String]) -> Vec<&'static str> {
+    let declared = declared.unwrap_or(&[]);
+    wanted.iter().filter_map(|w| declared.iter().find(|d| **d == w.as_str()).copied()).collect()
+}
