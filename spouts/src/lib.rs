@@ -1,5 +1,11 @@
 //! squall-spouts: sources — log readers (CARMEN, ROS 2 bags), simulators and
 //! network ingest.
-//!
-//! Empty until the robot data work lands (issue 3); the crate exists now so
-//! the workspace layout is the one DESIGN.md describes.
+
+pub mod carmen;
+
+use squall_topology::Registry;
+
+/// Registers every source kind: `carmen`.
+pub fn register(r: &mut Registry) {
+    r.register_spout("carmen", carmen::CarmenSpout::from_params);
+}

@@ -1,0 +1,101 @@
+//! Planar rigid motions (SE(2)) in SI units: metres and radians.
+
+use serde::{Deserialize, Serialize};
+
+/// The scalar type of the geometry code.
+pub type Real = f64;
+
+/// Wraps an angle into (-π, π].
+pub fn normalize_angle(a: Real) -> Real {
+    let two_pi = 2.0 * std::f64::consts::PI;
+    let mut r = a % two_pi;
+    if r <= -std::f64::consts::PI {
+        r += two_pi;
+    } else if r > std::f64::consts::PI {
+        r -= two_pi;
+    }
+    r
+}
+
+/// A pose in the plane: position (m) and heading (rad, in (-π, π]).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Pose2 {
+    /// x, metres.
+    pub x: Real,
+    /// y, metres.
+    pub y: Real,
+    /// Heading, radians, in (-π, π].
+    pub theta: Real,
+}
+
+impl Pose2 {
+    /// A pose; the heading is normalized.
+    pub fn new(x: Real, y: Real, theta: Real) -> Self {
+        Pose2 { x, y, theta: normalize_angle(theta) }
+    }
+
+    /// The identity motion.
+    pub const IDENTITY: Pose2 = Pose2 { x: 0.0, y: 0.0, theta: 0.0 };
+
+    /// `self ⊕ other`: `other` expressed in `self`'s frame, composed.
+    pub fn compose(&self, other: &Pose2) -> Pose2 {
+        let (s, c) = self.theta.sin_cos();
+        Pose2::new(
+            self.x + c * other.x - s * other.y,
+            self.y + s * other.x + c * other.y,
+            self.theta + other.theta,
+        )
+    }
+
+    /// The inverse motion: `p.inverse().compose(&p)` is the identity.
+    pub fn inverse(&self) -> Pose2 {
+        let (s, c) = self.theta.sin_cos();
+        Pose2::new(-c * self.x - s * self.y, s * self.x - c * self.y, -self.theta)
+    }
+
+    /// `self ⊖ from`: the motion from `from` to `self`, in `from`'s frame.
+    pub fn relative_to(&self, from: &Pose2) -> Pose2 {
+        from.inverse().compose(self)
+    }
+
+    /// Distance between the positions, metres.
+    pub fn distance(&self, other: &Pose2) -> Real {
+        (self.x - other.x).hypot(self.y - other.y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    fn close(a: &Pose2, b: &Pose2) -> bool {
+        (a.x - b.x).abs() < 1e-12
+            && (a.y - b.y).abs() < 1e-12
+            && normalize_angle(a.theta - b.theta).abs() < 1e-12
+    }
+
+    #[test]
+    fn angles_wrap_into_the_half_open_interval() {
+        assert_eq!(normalize_angle(PI), PI);
+        assert!((normalize_angle(-PI) - PI).abs() < 1e-15);
+        assert!((normalize_angle(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((normalize_angle(2.5 * PI) - 0.5 * PI).abs() < 1e-12);
+        assert!((normalize_angle(-0.5 * PI) + 0.5 * PI).abs() < 1e-15);
+    }
+
+    #[test]
+    fn compose_moves_in_the_local_frame() {
+        let facing_up = Pose2::new(1.0, 2.0, PI / 2.0);
+        let forward = Pose2::new(1.0, 0.0, 0.0);
+        assert!(close(&facing_up.compose(&forward), &Pose2::new(1.0, 3.0, PI / 2.0)));
+    }
+
+    #[test]
+    fn inverse_and_relative_round_trip() {
+        let a = Pose2::new(3.0, -1.0, 2.5);
+        let b = Pose2::new(-0.5, 4.0, -2.9);
+        assert!(close(&a.inverse().compose(&a), &Pose2::IDENTITY));
+        assert!(close(&a.compose(&b.relative_to(&a)), &b));
+    }
+}

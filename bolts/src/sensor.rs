@@ -1,0 +1,78 @@
+//! The readings robots stream: laser scans with the odometry pose at their
+//! stamp, and odometry alone. Every source (CARMEN logs, ROS 2 bags, the
+//! simulator, live robots) emits these types, so SLAM and localization bolts
+//! do not care where a reading came from.
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{Pose2, Real};
+
+/// One planar laser scan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LaserReading {
+    /// Time of the scan, seconds (the log's or bag's own clock).
+    pub stamp: f64,
+    /// Ranges, metres, beam i at `angle_min + i * angle_increment` in the
+    /// laser's frame. A range ≤ `range_min` or ≥ `range_max` is "no return".
+    pub ranges: Vec<f32>,
+    /// Angle of the first beam, radians.
+    pub angle_min: Real,
+    /// Angle between beams, radians.
+    pub angle_increment: Real,
+    /// Smallest valid range, metres.
+    pub range_min: Real,
+    /// Largest valid range, metres; readings at or above it are no return.
+    pub range_max: Real,
+    /// Odometry pose of the robot at `stamp`.
+    pub odometry: Pose2,
+    /// Pose of the laser in the robot's frame.
+    pub laser_offset: Pose2,
+}
+
+impl LaserReading {
+    /// Whether beam `i` measured something.
+    pub fn is_valid(&self, i: usize) -> bool {
+        let r = Real::from(self.ranges[i]);
+        r.is_finite() && r > self.range_min && r < self.range_max
+    }
+
+    /// Angle of beam `i` in the laser's frame.
+    pub fn beam_angle(&self, i: usize) -> Real {
+        self.angle_min + i as Real * self.angle_increment
+    }
+}
+
+/// An odometry pose on its own (between scans).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Odometry {
+    /// Time, seconds.
+    pub stamp: f64,
+    /// The pose.
+    pub pose: Pose2,
+    /// Forward velocity, m/s (0 if unknown).
+    pub linear_velocity: Real,
+    /// Turn rate, rad/s (0 if unknown).
+    pub angular_velocity: Real,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn no_return_readings_are_invalid() {
+        let r = LaserReading {
+            stamp: 0.0,
+            ranges: vec![0.0, 1.0, 50.0, 81.83, f32::NAN],
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: std::f64::consts::PI / 4.0,
+            range_min: 0.0,
+            range_max: 50.0,
+            odometry: Pose2::IDENTITY,
+            laser_offset: Pose2::IDENTITY,
+        };
+        let valid: Vec<bool> = (0..5).map(|i| r.is_valid(i)).collect();
+        assert_eq!(valid, [false, true, false, false, false]);
+        assert!((r.beam_angle(4) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,159 @@
+//! CARMEN logs: the `carmen` spout and its reader.
+//!
+//! The spout emits every front-laser scan on stream `scan`, rear-laser scans
+//! on `rear_scan` and odometry on `odom`, as fast as possible or paced at the
+//! recorded rate times a factor.
+
+mod parse;
+mod reader;
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+
+pub use parse::{Laser, LineParser, Record};
+pub use reader::{LogError, LogReader, ReadOptions, read_log};
+
+/// How fast the spout replays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// As fast as downstream accepts.
+    Max,
+    /// The recorded rate times this factor (1.0 = real time).
+    Recorded(f64),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CarmenParams {
+    /// The log file (plain or gzip).
+    log: PathBuf,
+    /// `"max"` (the default) or a factor of the recorded rate.
+    #[serde(default)]
+    rate: Option<toml::Value>,
+    /// Skip malformed records (counted) instead of failing.
+    #[serde(default)]
+    skip_bad: bool,
+    /// Range limit (m) when the log gives none. The default is 80.
+    #[serde(default = "default_range_max")]
+    range_max: f64,
+    /// Stop after this many front scans.
+    max_scans: Option<u64>,
+}
+
+fn default_range_max() -> f64 {
+    80.0
+}
+
+fn pace(rate: Option<&toml::Value>) -> Result<Pace, ParamError> {
+    match rate {
+        None => Ok(Pace::Max),
+        Some(toml::Value::String(s)) if s == "max" => Ok(Pace::Max),
+        Some(v) => match v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) {
+            Some(f) if f.is_finite() && f > 0.0 => Ok(Pace::Recorded(f)),
+            _ => Err(ParamError::new(format!("rate must be \"max\" or a positive factor, got {v}"))),
+        },
+    }
+}
+
+/// Replays a CARMEN log.
+#[derive(Debug)]
+pub struct CarmenSpout {
+    log: PathBuf,
+    pace: Pace,
+    options: ReadOptions,
+    max_scans: Option<u64>,
+    reader: Option<LogReader>,
+    scans: u64,
+    clock: Option<(Instant, f64)>,
+}
+
+impl CarmenSpout {
+    /// Builds the spout from its `params`.
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: CarmenParams = p.parse()?;
+        if !(params.range_max.is_finite() && params.range_max > 0.0) {
+            return Err(ParamError::new("range_max must be a positive number of metres"));
+        }
+        Ok(CarmenSpout {
+            pace: pace(params.rate.as_ref())?,
+            log: params.log,
+            options: ReadOptions { default_range_max: params.range_max, skip_bad: params.skip_bad },
+            max_scans: params.max_scans,
+            reader: None,
+            scans: 0,
+            clock: None,
+        })
+    }
+
+    async fn wait_for(&mut self, stamp: f64) {
+        let Pace::Recorded(factor) = self.pace else { return };
+        let (start, first) = *self.clock.get_or_insert((Instant::now(), stamp));
+        let due = start + Duration::from_secs_f64(((stamp - first) / factor).max(0.0));
+        tokio::time::sleep_until(due.into()).await;
+    }
+}
+
+impl Spout for CarmenSpout {
+    fn declare(&self, d: &mut Declarer) {
+        d.output::<LaserReading>("scan").output::<LaserReading>("rear_scan").output::<Odometry>("odom");
+    }
+
+    async fn open(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
+        self.reader = Some(LogReader::open(&self.log, self.options)?);
+        Ok(())
+    }
+
+    async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
+        if self.max_scans.is_some_and(|m| self.scans >= m) {
+            return Ok(SpoutStatus::Done);
+        }
+        let reader = self.reader.as_mut().ok_or("the log was not opened")?;
+        let record = match reader.next_record() {
+            None => {
+                let (skipped, other) = (reader.skipped(), reader.other_records().values().sum());
+                out.count("records_skipped", skipped);
+                out.count("records_other_types", other);
+                return Ok(SpoutStatus::Done);
+            }
+            Some(r) => r?,
+        };
+        match record {
+            Record::Scan(laser, reading) => {
+                self.wait_for(reading.stamp).await;
+                let stream = match laser {
+                    Laser::Front => {
+                        self.scans += 1;
+                        "scan"
+                    }
+                    Laser::Rear => "rear_scan",
+                };
+                out.emit(stream, reading).await?;
+            }
+            Record::Odom(odom) => {
+                self.wait_for(odom.stamp).await;
+                out.emit("odom", odom).await?;
+            }
+            Record::Param(..) | Record::Other(_) => {}
+        }
+        Ok(SpoutStatus::Continue)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rate_is_max_or_a_positive_factor() {
+        assert_eq!(pace(None).unwrap(), Pace::Max);
+        assert_eq!(pace(Some(&toml::Value::String("max".into()))).unwrap(), Pace::Max);
+        assert_eq!(pace(Some(&toml::Value::Float(2.5))).unwrap(), Pace::Recorded(2.5));
+        assert_eq!(pace(Some(&toml::Value::Integer(1))).unwrap(), Pace::Recorded(1.0));
+        assert!(pace(Some(&toml::Value::Float(-1.0))).is_err());
+        assert!(pace(Some(&toml::Value::String("fast".into()))).is_err());
+    }
+}

@@ -1,0 +1,294 @@
+//! CARMEN log lines → readings.
+//!
+//! Formats (CARMEN 0.7 and the Radish logs):
+//! - `ODOM x y theta tv rv accel ipc_timestamp host logger_timestamp`
+//! - `FLASER n r_1 .. r_n laser_x laser_y laser_theta odom_x odom_y odom_theta
+//!   ipc_timestamp host logger_timestamp` (`RLASER` likewise, rear laser)
+//! - `ROBOTLASER1 type start_angle fov resolution max_range accuracy
+//!   remission_mode n r_1 .. r_n m e_1 .. e_m laser_x laser_y laser_theta
+//!   robot_x robot_y robot_theta tv rv forward_safety side_safety turn_axis
+//!   ipc_timestamp host logger_timestamp`
+//! - `PARAM name value host timestamp`: `laser_{front,rear}_laser_angle_min`,
+//!   `laser_{front,rear}_laser_angle_increment`, `robot_{front,rear}_laser_max`
+//!   give the FLASER/RLASER beam geometry. Without them, n beams span 180°:
+//!   beam i is at −90° + i·180°/(n−1).
+//!
+//! Field counts are checked exactly, so a cut-off line is an error, never a
+//! short scan. Other message types are recognised as such and skipped by the
+//! caller (and counted there).
+
+use std::f64::consts::PI;
+
+use squall_bolts::geometry::{Pose2, Real};
+use squall_bolts::sensor::{LaserReading, Odometry};
+
+/// Which laser a scan came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Laser {
+    /// FLASER, or a ROBOTLASER1.
+    Front,
+    /// RLASER.
+    Rear,
+}
+
+/// One parsed line.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Record {
+    /// A scan with the odometry pose at its stamp.
+    Scan(Laser, LaserReading),
+    /// An odometry message.
+    Odom(Odometry),
+    /// A parameter (already applied to later scans).
+    Param(String, String),
+    /// A message type this reader does not use (e.g. `SYNC`, `TRUEPOS`).
+    Other(String),
+}
+
+/// Beam geometry of one laser, from PARAM lines or defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Geometry {
+    angle_min: Option<Real>,
+    angle_increment: Option<Real>,
+    range_max: Option<Real>,
+}
+
+/// Parses lines, remembering PARAM values for the scans after them.
+#[derive(Debug, Clone)]
+pub struct LineParser {
+    front: Geometry,
+    rear: Geometry,
+    default_range_max: Real,
+}
+
+impl LineParser {
+    /// A parser; `default_range_max` (metres) applies to lasers whose log
+    /// gives no `robot_*_laser_max`.
+    pub fn new(default_range_max: Real) -> Self {
+        let none = Geometry { angle_min: None, angle_increment: None, range_max: None };
+        LineParser { front: none, rear: none, default_range_max }
+    }
+
+    /// Parses one line (without its newline). `Ok(None)` for blank lines
+    /// and comments; `Err` says what was expected.
+    pub fn parse(&mut self, line: &str) -> Result<Option<Record>, String> {
+        let line = line.trim_end_matches('\r');
+        let mut fields = line.split_ascii_whitespace();
+        let Some(keyword) = fields.next() else { return Ok(None) };
+        if keyword.starts_with('#') {
+            return Ok(None);
+        }
+        let rest: Fields<'_> = Fields { items: fields.collect(), keyword };
+        match keyword {
+            "ODOM" => rest.odom().map(|o| Some(Record::Odom(o))),
+            "FLASER" => {
+                rest.flaser(&self.front, self.default_range_max).map(|r| Some(Record::Scan(Laser::Front, r)))
+            }
+            "RLASER" => {
+                rest.flaser(&self.rear, self.default_range_max).map(|r| Some(Record::Scan(Laser::Rear, r)))
+            }
+            "ROBOTLASER1" => rest.robotlaser1().map(|r| Some(Record::Scan(Laser::Front, r))),
+            "PARAM" => {
+                let (name, value) = rest.param()?;
+                self.apply_param(&name, &value)?;
+                Ok(Some(Record::Param(name, value)))
+            }
+            other => Ok(Some(Record::Other(other.to_string()))),
+        }
+    }
+
+    fn apply_param(&mut self, name: &str, value: &str) -> Result<(), String> {
+        let target = match name {
+            "laser_front_laser_angle_min" => &mut self.front.angle_min,
+            "laser_front_laser_angle_increment" => &mut self.front.angle_increment,
+            "robot_front_laser_max" => &mut self.front.range_max,
+            "laser_rear_laser_angle_min" => &mut self.rear.angle_min,
+            "laser_rear_laser_angle_increment" => &mut self.rear.angle_increment,
+            "robot_rear_laser_max" => &mut self.rear.range_max,
+            _ => return Ok(()),
+        };
+        let v: Real =
+            value.parse().map_err(|_| format!("PARAM {name}: expected a number, found \"{value}\""))?;
+        *target = Some(v);
+        Ok(())
+    }
+}
+
+struct Fields<'a> {
+    items: Vec<&'a str>,
+    keyword: &'a str,
+}
+
+impl<'a> Fields<'a> {
+    fn expect_len(&self, n: usize, what: &str) -> Result<(), String> {
+        if self.items.len() == n {
+            Ok(())
+        } else {
+            Err(format!(
+                "{} {what} needs {n} fields after the keyword, found {}{}",
+                self.keyword,
+                self.items.len(),
+                if self.items.len() < n { " (line cut off?)" } else { "" }
+            ))
+        }
+    }
+
+    fn num(&self, i: usize, what: &str) -> Result<Real, String> {
+        let s = self.items[i];
+        match s.parse::<Real>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(format!(
+                "{}: expected a number for {what} (field {}), found \"{s}\"",
+                self.keyword,
+                i + 1
+            )),
+        }
+    }
+
+    fn count(&self, i: usize, what: &str) -> Result<usize, String> {
+        let s =
+            self.items.get(i).ok_or_else(|| format!("{}: missing {what} (line cut off?)", self.keyword))?;
+        s.parse::<usize>().map_err(|_| {
+            format!("{}: expected a count for {what} (field {}), found \"{s}\"", self.keyword, i + 1)
+        })
+    }
+
+    fn pose(&self, i: usize, what: &str) -> Result<Pose2, String> {
+        Ok(Pose2::new(self.num(i, what)?, self.num(i + 1, what)?, self.num(i + 2, what)?))
+    }
+
+    fn ranges(&self, from: usize, n: usize) -> Result<Vec<f32>, String> {
+        (from..from + n).map(|i| self.num(i, "a range").map(|r| r as f32)).collect()
+    }
+
+    fn odom(&self) -> Result<Odometry, String> {
+        self.expect_len(9, "(x y theta tv rv accel ipc_timestamp host logger_timestamp)")?;
+        Ok(Odometry {
+            pose: self.pose(0, "the pose")?,
+            linear_velocity: self.num(3, "tv")?,
+            angular_velocity: self.num(4, "rv")?,
+            stamp: self.num(6, "ipc_timestamp")?,
+        })
+    }
+
+    fn flaser(&self, geometry: &Geometry, default_range_max: Real) -> Result<LaserReading, String> {
+        let n = self.count(0, "num_readings")?;
+        if n < 2 {
+            return Err(format!("{}: a scan needs at least 2 readings, found {n}", self.keyword));
+        }
+        self.expect_len(n + 10, &format!("with {n} readings"))?;
+        let ranges = self.ranges(1, n)?;
+        let laser = self.pose(n + 1, "the laser pose")?;
+        let odometry = self.pose(n + 4, "the odometry pose")?;
+        Ok(LaserReading {
+            stamp: self.num(n + 7, "ipc_timestamp")?,
+            ranges,
+            angle_min: geometry.angle_min.unwrap_or(-PI / 2.0),
+            angle_increment: geometry.angle_increment.unwrap_or(PI / (n - 1) as Real),
+            range_min: 0.0,
+            range_max: geometry.range_max.unwrap_or(default_range_max),
+            laser_offset: laser.relative_to(&odometry),
+            odometry,
+        })
+    }
+
+    fn robotlaser1(&self) -> Result<LaserReading, String> {
+        let n = self.count(7, "num_readings")?;
+        let m = self.count(8 + n, "num_remissions")?;
+        self.expect_len(8 + n + 1 + m + 14, &format!("with {n} readings and {m} remissions"))?;
+        let start_angle = self.num(1, "start_angle")?;
+        let resolution = self.num(3, "angular_resolution")?;
+        let range_max = self.num(4, "maximum_range")?;
+        let ranges = self.ranges(8, n)?;
+        let at = 8 + n + 1 + m;
+        let laser = self.pose(at, "the laser pose")?;
+        let odometry = self.pose(at + 3, "the robot pose")?;
+        Ok(LaserReading {
+            stamp: self.num(at + 11, "ipc_timestamp")?,
+            ranges,
+            angle_min: start_angle,
+            angle_increment: resolution,
+            range_min: 0.0,
+            range_max,
+            laser_offset: laser.relative_to(&odometry),
+            odometry,
+        })
+    }
+
+    fn param(&self) -> Result<(String, String), String> {
+        if self.items.len() < 2 {
+            return Err("PARAM needs a name and a value".to_string());
+        }
+        Ok((self.items[0].to_string(), self.items[1].to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(line: &str, p: &mut LineParser) -> LaserReading {
+        match p.parse(line).unwrap() {
+            Some(Record::Scan(_, r)) => r,
+            other => panic!("not a scan: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn flaser_without_params_spans_180_degrees() {
+        let mut p = LineParser::new(80.0);
+        let r = scan("FLASER 3 1.0 2.0 81.91 1.5 2.0 0.0 1.0 2.0 0.0 12.5 host 12.6", &mut p);
+        assert_eq!(r.ranges, vec![1.0, 2.0, 81.91]);
+        assert_eq!(r.stamp, 12.5);
+        assert!((r.angle_min + PI / 2.0).abs() < 1e-12);
+        assert!((r.angle_increment - PI / 2.0).abs() < 1e-12);
+        assert_eq!(r.range_max, 80.0);
+        assert!(!r.is_valid(2), "81.91 is a no-return reading");
+        assert_eq!(r.odometry, Pose2::new(1.0, 2.0, 0.0));
+        // The laser sits 0.5 m ahead of the robot along its heading.
+        assert!((r.laser_offset.x - 0.5).abs() < 1e-9 && r.laser_offset.y.abs() < 1e-9);
+    }
+
+    #[test]
+    fn params_set_the_geometry_of_later_scans() {
+        let mut p = LineParser::new(80.0);
+        for line in [
+            "PARAM laser_front_laser_angle_min -1.570796371 nohost 0",
+            "PARAM laser_front_laser_angle_increment 0.017550798 nohost 0",
+            "PARAM robot_front_laser_max 50.00 nohost 0",
+        ] {
+            assert!(matches!(p.parse(line).unwrap(), Some(Record::Param(..))));
+        }
+        let r = scan("FLASER 2 1 2 0 0 0 0 0 0 1.0 h 1.0", &mut p);
+        assert_eq!((r.angle_min, r.angle_increment, r.range_max), (-1.570796371, 0.017550798, 50.0));
+    }
+
+    #[test]
+    fn odom_and_robotlaser1() {
+        let mut p = LineParser::new(80.0);
+        let o = p.parse("ODOM 1 2 3 0.5 0.1 0 70.18 nohost 70.18").unwrap();
+        assert!(matches!(o, Some(Record::Odom(Odometry { stamp: 70.18, linear_velocity: 0.5, .. }))));
+        let line = "ROBOTLASER1 0 -1.5708 3.1416 0.0175 81.9 0.01 0 3 1 2 3 0 \
+                    1 1 0 1 1 0 0 0 0 0 0 5.5 host 5.6";
+        let r = scan(line, &mut p);
+        assert_eq!((r.ranges.len(), r.stamp, r.range_max), (3, 5.5, 81.9));
+    }
+
+    #[test]
+    fn cut_off_and_malformed_lines_say_what_was_expected() {
+        let mut p = LineParser::new(80.0);
+        let e = p.parse("FLASER 180 1.0 2.0 3.0").unwrap_err();
+        assert!(
+            e.contains(
+                "FLASER with 180 readings needs 190 fields after the keyword, found 4 (line cut off?)"
+            ),
+            "{e}"
+        );
+        let e = p.parse("ODOM 1 2 x 0 0 0 1 h 1").unwrap_err();
+        assert!(e.contains("expected a number for the pose (field 3), found \"x\""), "{e}");
+        let e = p.parse("FLASER many 1 2").unwrap_err();
+        assert!(e.contains("expected a count for num_readings"), "{e}");
+        assert_eq!(p.parse("   ").unwrap(), None);
+        assert_eq!(p.parse("# comment").unwrap(), None);
+        assert_eq!(p.parse("SYNC 1 2").unwrap(), Some(Record::Other("SYNC".into())));
+    }
+}
