@@ -204,3 +204,75 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     assert_eq!(counts[2].0, emitted, "sink: every emitted tuple was processed");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+fn shared_data(rel: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
+    assert!(
+        path.exists(),
+        "missing {}: this test reads the shared data set (../shared/data beside the repository)",
+        path.display()
+    );
+    path.to_string_lossy().into_owned()
+}
+
+#[test]
+fn eval_scores_raw_odometry_of_the_real_logs_as_published() {
+    for (log, expected) in [("aces", 0.549), ("intel", 7.39), ("mit-csail", 1.68)] {
+        let clf = shared_data(&format!("laser/{log}.clf"));
+        let relations = shared_data(&format!("laser/{log}.relations"));
+        let out = squall(&["eval", "--trajectory", &clf, "--relations", &relations, "--json"]);
+        assert!(out.status.success(), "{log}: {}", text(&out.stderr));
+        let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+        assert_eq!(v["matched"], v["total"], "{log}: every relation has poses");
+        let trans = v["trans_mean"].as_f64().unwrap();
+        let digits = if expected < 1.0 { 1e-3 } else { 1e-2 };
+        assert!((trans - expected).abs() < digits, "{log}: {trans} vs published {expected}");
+        for key in ["trans_std", "rot_mean_deg", "rot_std_deg"] {
+            assert!(v[key].as_f64().unwrap() > 0.0, "{log}: {key}");
+        }
+    }
+}
+
+#[test]
+fn eval_round_trips_a_tum_trajectory_and_reports_bad_files() {
+    let dir = out_dir("eval");
+    std::fs::create_dir_all(&dir).unwrap();
+    // The odometry of the CSAIL log as TUM scores the same as the log itself.
+    let clf = shared_data("laser/mit-csail.clf");
+    let records = squall::spouts::carmen::read_log(Path::new(&clf), Default::default()).unwrap();
+    let mut t = squall::bolts::eval::trajectory::Trajectory::default();
+    for r in records {
+        if let squall::spouts::carmen::Record::Scan(_, s) = r {
+            t.push(s.stamp, s.odometry);
+        }
+    }
+    let tum = dir.join("odom.tum");
+    std::fs::write(&tum, t.to_tum()).unwrap();
+    let relations = shared_data("laser/mit-csail.relations");
+    let from_tum =
+        squall(&["eval", "--trajectory", tum.to_str().unwrap(), "--relations", &relations, "--json"]);
+    let from_clf = squall(&["eval", "--trajectory", &clf, "--relations", &relations, "--json"]);
+    let a: serde_json::Value = serde_json::from_str(&text(&from_tum.stdout)).unwrap();
+    let b: serde_json::Value = serde_json::from_str(&text(&from_clf.stdout)).unwrap();
+    assert!((a["trans_mean"].as_f64().unwrap() - b["trans_mean"].as_f64().unwrap()).abs() < 1e-5);
+
+    // Against itself as ground truth, everything is zero.
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        tum.to_str().unwrap(),
+        "--ground-truth",
+        tum.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(v["pairs"], 1988);
+    assert!(v["ate_rmse"].as_f64().unwrap() < 1e-6 && v["rpe_trans_rmse"].as_f64().unwrap() < 1e-6);
+
+    let bad = dir.join("bad.tum");
+    std::fs::write(&bad, "1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n").unwrap();
+    let out = squall(&["eval", "--trajectory", bad.to_str().unwrap(), "--relations", &relations]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("bad.tum:2: expected 8 fields"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -11,5 +11,6 @@ pub fn registry() -> Registry {
     let mut r = Registry::new();
     probe::register(&mut r);
     wordcount::register(&mut r);
+    squall_spouts::register(&mut r);
     r
 }

@@ -1,5 +1,6 @@
 //! Argument parsing and the subcommands.
 
+mod eval;
 mod progress;
 mod run;
 
@@ -25,6 +26,7 @@ const EXIT_FAILED: u8 = 1;
         squall run examples/topologies/probe.toml --set source.params.count=100000 --set relay.parallelism=2\n  \
         squall validate examples/topologies/wordcount.toml\n  \
         squall graph examples/topologies/wordcount.toml | dot -Tsvg > wc.svg\n  \
+        squall eval --trajectory out/trajectory.tum --relations aces.relations\n  \
         squall kinds\n\n\
         Exit codes: 0 success, 1 the run failed, 2 invalid topology or arguments."
 )]
@@ -72,6 +74,9 @@ enum Command {
         #[command(flatten)]
         topology: TopologyArgs,
     },
+    /// Score a trajectory: the relation metric and/or errors against ground
+    /// truth.
+    Eval(eval::EvalArgs),
     /// List the component kinds this binary knows.
     Kinds,
 }
@@ -111,6 +116,7 @@ pub(crate) fn main() -> ExitCode {
             }
             Err(code) => code,
         },
+        Command::Eval(args) => eval::eval(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");

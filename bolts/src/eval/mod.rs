@@ -1,1 +1,23 @@
-//! eval
+//! Accuracy the way the SLAM field measures it.
+//!
+//! - [`relations`]: the relation metric of Kümmerle et al. 2009 ("On
+//!   measuring the accuracy of SLAM algorithms"): for each ground-truth
+//!   relation between two scans, the error of the estimated relative motion.
+//! - [`ground_truth`]: absolute trajectory error after an SE(2) alignment,
+//!   and relative pose error between consecutive poses.
+//! - [`trajectory`]: timestamped poses, read from and written as TUM.
+
+pub mod ground_truth;
+pub mod relations;
+pub mod trajectory;
+
+/// Mean and population standard deviation.
+pub(crate) fn mean_std(values: &[f64]) -> (f64, f64) {
+    if values.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
+}

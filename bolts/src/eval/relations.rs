@@ -1,0 +1,196 @@
+//! The relation metric (Kümmerle et al. 2009).
+//!
+//! A relation `t1 t2 x y z roll pitch yaw` is the true motion of the robot
+//! from the scan at `t1` to the scan at `t2`, in the frame of the first. The
+//! error of a trajectory on it is `(p2 ⊖ p1) ⊖ δ`: its translation length
+//! and the absolute value of its angle. The metric is the mean and standard
+//! deviation of both over all relations.
+
+use serde::Serialize;
+
+use crate::eval::mean_std;
+use crate::eval::trajectory::{Trajectory, TrajectoryError};
+use crate::geometry::{Pose2, normalize_angle};
+
+/// How far (s) a trajectory stamp may be from a relation's stamp to match.
+pub const STAMP_TOLERANCE: f64 = 1e-3;
+
+/// One ground-truth relation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Relation {
+    /// Stamp of the first scan, seconds.
+    pub t1: f64,
+    /// Stamp of the second scan, seconds.
+    pub t2: f64,
+    /// True motion from the first to the second, in the first's frame.
+    pub motion: Pose2,
+}
+
+/// Parses a relations file; `path` names it in errors.
+pub fn parse_relations(path: &str, text: &str) -> Result<Vec<Relation>, TrajectoryError> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let bad = |message: String| TrajectoryError::Bad { path: path.to_string(), line: i + 1, message };
+        let v: Vec<f64> = line
+            .split_ascii_whitespace()
+            .map(|f| f.parse::<f64>().map_err(|_| bad(format!("expected a number, found \"{f}\""))))
+            .collect::<Result<_, _>>()?;
+        if v.len() != 8 {
+            return Err(bad(format!("expected 8 fields (t1 t2 x y z roll pitch yaw), found {}", v.len())));
+        }
+        out.push(Relation { t1: v[0], t2: v[1], motion: Pose2::new(v[2], v[3], v[7]) });
+    }
+    Ok(out)
+}
+
+/// Reads a relations file.
+pub fn read_relations(path: &std::path::Path) -> Result<Vec<Relation>, TrajectoryError> {
+    let name = path.display().to_string();
+    let text =
+        std::fs::read_to_string(path).map_err(|source| TrajectoryError::Io { path: name.clone(), source })?;
+    parse_relations(&name, &text)
+}
+
+/// The relation metric of one trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RelationScore {
+    /// Relations whose two stamps both have a pose.
+    pub matched: usize,
+    /// Relations in the file.
+    pub total: usize,
+    /// Mean translational error, metres.
+    pub trans_mean: f64,
+    /// Its standard deviation, metres.
+    pub trans_std: f64,
+    /// Mean rotational error, degrees.
+    pub rot_mean_deg: f64,
+    /// Its standard deviation, degrees.
+    pub rot_std_deg: f64,
+}
+
+/// The error of one relation: (translation m, rotation rad).
+pub fn relation_error(p1: &Pose2, p2: &Pose2, truth: &Pose2) -> (f64, f64) {
+    let estimated = p2.relative_to(p1);
+    let e = estimated.relative_to(truth);
+    (e.x.hypot(e.y), normalize_angle(e.theta).abs())
+}
+
+/// Scores `trajectory` on `relations`; relations without poses at both
+/// stamps are not counted (see `matched`).
+pub fn score(trajectory: &Trajectory, relations: &[Relation]) -> RelationScore {
+    let (mut trans, mut rot) = (Vec::new(), Vec::new());
+    for r in relations {
+        let (Some(p1), Some(p2)) =
+            (trajectory.at(r.t1, STAMP_TOLERANCE), trajectory.at(r.t2, STAMP_TOLERANCE))
+        else {
+            continue;
+        };
+        let (t, a) = relation_error(&p1, &p2, &r.motion);
+        trans.push(t);
+        rot.push(a.to_degrees());
+    }
+    let (trans_mean, trans_std) = mean_std(&trans);
+    let (rot_mean_deg, rot_std_deg) = mean_std(&rot);
+    RelationScore {
+        matched: trans.len(),
+        total: relations.len(),
+        trans_mean,
+        trans_std,
+        rot_mean_deg,
+        rot_std_deg,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square_walk() -> Trajectory {
+        let mut t = Trajectory::default();
+        let mut p = Pose2::IDENTITY;
+        for i in 0..40 {
+            t.push(i as f64, p);
+            let step = if i % 10 == 9 {
+                Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2)
+            } else {
+                Pose2::new(1.0, 0.0, 0.0)
+            };
+            p = p.compose(&step);
+        }
+        t
+    }
+
+    fn exact_relations(t: &Trajectory) -> Vec<Relation> {
+        (0..t.len() - 3)
+            .map(|i| Relation {
+                t1: t.stamps[i],
+                t2: t.stamps[i + 3],
+                motion: t.poses[i + 3].relative_to(&t.poses[i]),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_true_trajectory_scores_zero() {
+        let t = square_walk();
+        let s = score(&t, &exact_relations(&t));
+        assert_eq!((s.matched, s.total), (37, 37));
+        assert!(s.trans_mean < 1e-12 && s.rot_mean_deg < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn a_known_drift_gives_a_known_error() {
+        let t = square_walk();
+        let relations = exact_relations(&t);
+        // Every step 10 % too long: over 3 steps the estimate overshoots 0.3 m
+        // along the path, whatever the turns.
+        let mut drift = Trajectory::default();
+        let mut p = Pose2::IDENTITY;
+        for i in 0..40 {
+            drift.push(i as f64, p);
+            let step = if i % 10 == 9 {
+                Pose2::new(1.1, 0.0, std::f64::consts::FRAC_PI_2)
+            } else {
+                Pose2::new(1.1, 0.0, 0.0)
+            };
+            p = p.compose(&step);
+        }
+        let s = score(&drift, &relations);
+        let straight: Vec<f64> = relations
+            .iter()
+            .filter(|r| r.motion.theta.abs() < 1e-9)
+            .map(|r| {
+                relation_error(&drift.at(r.t1, 0.0).unwrap(), &drift.at(r.t2, 0.0).unwrap(), &r.motion).0
+            })
+            .collect();
+        assert!(straight.iter().all(|e| (e - 0.3).abs() < 1e-9), "{straight:?}");
+        assert!(s.trans_mean > 0.25 && s.rot_mean_deg < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn unmatched_stamps_are_not_counted() {
+        let t = square_walk();
+        let mut relations = exact_relations(&t);
+        relations.push(Relation { t1: 100.0, t2: 101.0, motion: Pose2::IDENTITY });
+        let s = score(&t, &relations);
+        assert_eq!((s.matched, s.total), (37, 38));
+    }
+
+    #[test]
+    fn parses_kummerle_files() {
+        let r = parse_relations(
+            "r",
+            "90.239599 90.719599 0.422330 -0.000750 0.000000 0.000000 0.000000 0.017260\n",
+        )
+        .unwrap();
+        assert_eq!(r[0].t2, 90.719599);
+        assert_eq!(r[0].motion, Pose2::new(0.42233, -0.00075, 0.01726));
+        assert!(
+            parse_relations("r", "1 2 3\n").unwrap_err().to_string().starts_with("r:1: expected 8 fields")
+        );
+    }
+}
