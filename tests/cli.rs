@@ -276,3 +276,46 @@ fn eval_round_trips_a_tum_trajectory_and_reports_bad_files() {
     assert!(text(&out.stderr).contains("bad.tum:2: expected 8 fields"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn log_and_bag_sources_run_in_a_topology() {
+    let dir = out_dir("replay");
+    let log = shared_data("laser/aces.clf");
+    let out = squall(&[
+        "run",
+        "examples/topologies/replay.toml",
+        "--set",
+        &format!("source.params.log={log}"),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let count = &m["components"][1]["custom"];
+    assert_eq!(count["tuples.source.scan"], 7374);
+    assert_eq!(count["tuples.source.odom"], 7375);
+
+    let bag = shared_data("rosbag2/aces");
+    let out = squall(&[
+        "run",
+        "examples/topologies/replay.toml",
+        "--set",
+        "source.kind=rosbag2",
+        "--set",
+        &format!("source.params={{ bag = \"{bag}\", max_scans = 500 }}"),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(m["components"][1]["custom"]["tuples.source.scan"], 500);
+
+    // A missing log names the file and fails the run.
+    let out =
+        squall(&["run", "examples/topologies/replay.toml", "--set", "source.params.log=/nonexistent.clf"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out.stderr).contains("/nonexistent.clf: cannot open"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -2,10 +2,12 @@
 //! network ingest.
 
 pub mod carmen;
+pub mod rosbag2;
 
 use squall_topology::Registry;
 
-/// Registers every source kind: `carmen`.
+/// Registers every source kind: `carmen`, `rosbag2`.
 pub fn register(r: &mut Registry) {
     r.register_spout("carmen", carmen::CarmenSpout::from_params);
+    r.register_spout("rosbag2", rosbag2::Rosbag2Spout::from_params);
 }

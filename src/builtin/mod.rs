@@ -1,6 +1,7 @@
 //! Every component kind the `squall` binary knows.
 
 pub mod probe;
+pub mod sink;
 pub mod wordcount;
 
 use squall_topology::Registry;
@@ -11,6 +12,7 @@ pub fn registry() -> Registry {
     let mut r = Registry::new();
     probe::register(&mut r);
     wordcount::register(&mut r);
+    sink::register(&mut r);
     squall_spouts::register(&mut r);
     r
 }

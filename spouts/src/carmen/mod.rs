@@ -48,7 +48,8 @@ fn default_range_max() -> f64 {
     80.0
 }
 
-fn pace(rate: Option<&toml::Value>) -> Result<Pace, ParamError> {
+/// Parses a `rate` parameter: `"max"` or a positive factor.
+pub(crate) fn pace(rate: Option<&toml::Value>) -> Result<Pace, ParamError> {
     match rate {
         None => Ok(Pace::Max),
         Some(toml::Value::String(s)) if s == "max" => Ok(Pace::Max),

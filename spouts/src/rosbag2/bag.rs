@@ -1,0 +1,228 @@
+//! Reads a ROS 2 bag (MCAP storage, CDR messages) into readings.
+//!
+//! Scans come from a `sensor_msgs/msg/LaserScan` topic; the robot's pose at
+//! each scan's stamp is interpolated from the `nav_msgs/msg/Odometry` topic,
+//! as a robot's own TF would; the laser's mounting comes from `/tf_static`.
+//! The bag is read into memory whole.
+
+use std::path::{Path, PathBuf};
+
+use squall_bolts::geometry::{Pose2, normalize_angle};
+use squall_bolts::sensor::{LaserReading, Odometry};
+
+use super::messages::{self, Transform};
+
+/// Scans farther than this (s) from the odometry stream's first or last
+/// message get no pose: they are counted, not guessed.
+pub const MAX_EXTRAPOLATION: f64 = 0.2;
+
+/// Which topics to read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Topics {
+    /// LaserScan topic. The default is `/scan`.
+    pub scan: String,
+    /// Odometry topic. The default is `/odom`.
+    pub odom: String,
+    /// Static transforms. The default is `/tf_static`.
+    pub tf_static: String,
+}
+
+impl Default for Topics {
+    fn default() -> Self {
+        Topics { scan: "/scan".into(), odom: "/odom".into(), tf_static: "/tf_static".into() }
+    }
+}
+
+/// A problem reading a bag.
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    /// The bag or a file in it could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The bag holds no MCAP file.
+    #[error("{0}: no .mcap file in this bag folder")]
+    Empty(PathBuf),
+    /// The MCAP container is malformed or truncated.
+    #[error("{path}: malformed MCAP after message {index}: {message}")]
+    Container {
+        /// The file.
+        path: PathBuf,
+        /// Messages read before the problem.
+        index: usize,
+        /// What the MCAP reader said.
+        message: String,
+    },
+    /// A message could not be decoded.
+    #[error("{path}: message {index} on {topic}: {message}")]
+    Message {
+        /// The file.
+        path: PathBuf,
+        /// 0-based index of the message in the file.
+        index: usize,
+        /// Its topic.
+        topic: String,
+        /// What was expected.
+        message: String,
+    },
+}
+
+/// What a bag yields.
+#[derive(Debug, Clone, Default)]
+pub struct BagReadings {
+    /// Scans with interpolated odometry, in stamp order.
+    pub scans: Vec<LaserReading>,
+    /// The odometry stream, in stamp order.
+    pub odometry: Vec<Odometry>,
+    /// Scans outside the odometry stream's time span (not emitted).
+    pub scans_without_odometry: u64,
+}
+
+fn mcap_files(path: &Path) -> Result<Vec<PathBuf>, BagError> {
+    let io = |source| BagError::Io { path: path.to_path_buf(), source };
+    if path.is_file() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+        .map_err(io)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(BagError::Empty(path.to_path_buf()));
+    }
+    Ok(files)
+}
+
+const SCAN_TYPE: &str = "sensor_msgs/msg/LaserScan";
+const ODOM_TYPE: &str = "nav_msgs/msg/Odometry";
+const TF_TYPE: &str = "tf2_msgs/msg/TFMessage";
+
+/// Reads the scans and odometry of the bag at `path` (a bag folder or one
+/// `.mcap` file).
+pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
+    let mut raw_scans = Vec::new();
+    let mut odometry = Vec::new();
+    let mut statics: Vec<Transform> = Vec::new();
+    for file in mcap_files(path)? {
+        let bytes = std::fs::read(&file).map_err(|source| BagError::Io { path: file.clone(), source })?;
+        let container = |index, e: mcap::McapError| BagError::Container {
+            path: file.clone(),
+            index,
+            message: e.to_string(),
+        };
+        let stream = mcap::MessageStream::new(&bytes).map_err(|e| container(0, e))?;
+        for (index, message) in stream.enumerate() {
+            let message = message.map_err(|e| container(index, e))?;
+            let topic = message.channel.topic.as_str();
+            let expected = if topic == topics.scan {
+                SCAN_TYPE
+            } else if topic == topics.odom {
+                ODOM_TYPE
+            } else if topic == topics.tf_static {
+                TF_TYPE
+            } else {
+                continue;
+            };
+            let bad = |message: String| BagError::Message {
+                path: file.clone(),
+                index,
+                topic: topic.to_string(),
+                message,
+            };
+            let schema = message.channel.schema.as_ref().map_or("", |s| s.name.as_str());
+            if schema != expected || message.channel.message_encoding != "cdr" {
+                return Err(bad(format!(
+                    "carries {schema} ({}), expected {expected} (cdr)",
+                    message.channel.message_encoding
+                )));
+            }
+            match expected {
+                SCAN_TYPE => raw_scans.push(messages::laser_scan(&message.data).map_err(bad)?),
+                ODOM_TYPE => {
+                    let o = messages::odometry(&message.data).map_err(bad)?;
+                    odometry.push(Odometry {
+                        stamp: o.header.stamp,
+                        pose: o.pose,
+                        linear_velocity: o.linear_x,
+                        angular_velocity: o.angular_z,
+                    });
+                }
+                _ => statics.extend(messages::tf_message(&message.data).map_err(bad)?),
+            }
+        }
+    }
+    odometry.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
+    raw_scans.sort_by(|a, b| a.header.stamp.total_cmp(&b.header.stamp));
+    let mut out = BagReadings { odometry, ..Default::default() };
+    for scan in raw_scans {
+        let Some(pose) = interpolate(&out.odometry, scan.header.stamp) else {
+            out.scans_without_odometry += 1;
+            continue;
+        };
+        let laser_offset = statics
+            .iter()
+            .find(|t| t.child_frame_id == scan.header.frame_id)
+            .map_or(Pose2::IDENTITY, |t| t.pose);
+        out.scans.push(LaserReading {
+            stamp: scan.header.stamp,
+            ranges: scan.ranges,
+            angle_min: f64::from(scan.angle_min),
+            angle_increment: f64::from(scan.angle_increment),
+            range_min: f64::from(scan.range_min),
+            range_max: f64::from(scan.range_max),
+            odometry: pose,
+            laser_offset,
+        });
+    }
+    Ok(out)
+}
+
+/// The odometry pose at `t`, linear in position and along the shorter arc in
+/// heading between the two messages around it.
+pub fn interpolate(odometry: &[Odometry], t: f64) -> Option<Pose2> {
+    let first = odometry.first()?;
+    let last = odometry.last()?;
+    if t <= first.stamp {
+        return (first.stamp - t <= MAX_EXTRAPOLATION).then_some(first.pose);
+    }
+    if t >= last.stamp {
+        return (t - last.stamp <= MAX_EXTRAPOLATION).then_some(last.pose);
+    }
+    let i = odometry.partition_point(|o| o.stamp <= t);
+    let (a, b) = (&odometry[i - 1], &odometry[i]);
+    let span = b.stamp - a.stamp;
+    let f = if span > 0.0 { (t - a.stamp) / span } else { 0.0 };
+    Some(Pose2::new(
+        a.pose.x + f * (b.pose.x - a.pose.x),
+        a.pose.y + f * (b.pose.y - a.pose.y),
+        a.pose.theta + f * normalize_angle(b.pose.theta - a.pose.theta),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn odom(stamp: f64, x: f64, theta: f64) -> Odometry {
+        Odometry { stamp, pose: Pose2::new(x, 0.0, theta), linear_velocity: 0.0, angular_velocity: 0.0 }
+    }
+
+    #[test]
+    fn interpolates_position_and_heading_across_the_wrap() {
+        let stream = [odom(1.0, 0.0, 3.0), odom(2.0, 1.0, -3.0)];
+        let p = interpolate(&stream, 1.5).unwrap();
+        assert!((p.x - 0.5).abs() < 1e-12);
+        // From 3.0 to −3.0 the short way passes through π.
+        assert!((p.theta.abs() - (3.0 + (2.0 * std::f64::consts::PI - 6.0) / 2.0)).abs() < 1e-9, "{p:?}");
+        assert_eq!(interpolate(&stream, 0.9).unwrap().x, 0.0);
+        assert!(interpolate(&stream, 0.5).is_none());
+        assert!(interpolate(&stream, 2.5).is_none());
+        assert!(interpolate(&[], 1.0).is_none());
+    }
+}

@@ -1,0 +1,121 @@
+//! A little-endian CDR (XCDR1) reader for ROS 2 messages.
+//!
+//! Primitives are aligned to their size relative to the start of the data
+//! after the 4-byte encapsulation header. Every read is bounds-checked:
+//! malformed input gives an error saying what was expected, never a panic.
+
+/// Reads one CDR-encoded message.
+#[derive(Debug)]
+pub(crate) struct Cdr<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+/// What went wrong decoding.
+pub(crate) type CdrResult<T> = Result<T, String>;
+
+impl<'a> Cdr<'a> {
+    /// Checks the encapsulation header (CDR little endian, with or without
+    /// the XCDR1 "plain" options).
+    pub(crate) fn new(bytes: &'a [u8]) -> CdrResult<Self> {
+        if bytes.len() < 4 {
+            return Err(format!("{} bytes is too short for a CDR header", bytes.len()));
+        }
+        match bytes[1] {
+            0x01 => Ok(Cdr { data: &bytes[4..], pos: 0 }),
+            0x00 => Err("big-endian CDR is not supported".to_string()),
+            other => Err(format!("unknown CDR encapsulation 0x{:02x}{other:02x}", bytes[0])),
+        }
+    }
+
+    fn take(&mut self, n: usize, align: usize, what: &str) -> CdrResult<&'a [u8]> {
+        let start = self.pos.div_ceil(align) * align;
+        let end = start.checked_add(n).ok_or_else(|| format!("{what}: size overflow"))?;
+        if end > self.data.len() {
+            return Err(format!(
+                "{what}: needs {n} bytes at offset {start}, the message has {} (truncated?)",
+                self.data.len()
+            ));
+        }
+        self.pos = end;
+        Ok(&self.data[start..end])
+    }
+
+    pub(crate) fn u32(&mut self, what: &str) -> CdrResult<u32> {
+        Ok(u32::from_le_bytes(self.take(4, 4, what)?.try_into().expect("4 bytes")))
+    }
+
+    pub(crate) fn i32(&mut self, what: &str) -> CdrResult<i32> {
+        Ok(i32::from_le_bytes(self.take(4, 4, what)?.try_into().expect("4 bytes")))
+    }
+
+    pub(crate) fn f32(&mut self, what: &str) -> CdrResult<f32> {
+        Ok(f32::from_le_bytes(self.take(4, 4, what)?.try_into().expect("4 bytes")))
+    }
+
+    pub(crate) fn f64(&mut self, what: &str) -> CdrResult<f64> {
+        Ok(f64::from_le_bytes(self.take(8, 8, what)?.try_into().expect("8 bytes")))
+    }
+
+    /// A string: u32 length including the terminating NUL, then the bytes.
+    pub(crate) fn string(&mut self, what: &str) -> CdrResult<String> {
+        let len = self.u32(what)? as usize;
+        let bytes = self.take(len, 1, what)?;
+        let text = bytes.strip_suffix(&[0]).unwrap_or(bytes);
+        String::from_utf8(text.to_vec()).map_err(|_| format!("{what}: not UTF-8"))
+    }
+
+    /// A sequence length, checked against the bytes left for `elem` bytes
+    /// per element (so a corrupt length cannot allocate gigabytes).
+    pub(crate) fn seq_len(&mut self, elem: usize, what: &str) -> CdrResult<usize> {
+        let n = self.u32(what)? as usize;
+        let left = self.data.len().saturating_sub(self.pos);
+        if n.saturating_mul(elem) > left {
+            return Err(format!(
+                "{what}: {n} elements do not fit in the {left} bytes left (corrupt length?)"
+            ));
+        }
+        Ok(n)
+    }
+
+    pub(crate) fn f32_seq(&mut self, what: &str) -> CdrResult<Vec<f32>> {
+        let n = self.seq_len(4, what)?;
+        let bytes = self.take(n * 4, 4, what)?;
+        Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect())
+    }
+
+    /// Skips `n` f64 values (fixed-size arrays such as covariances).
+    pub(crate) fn skip_f64s(&mut self, n: usize, what: &str) -> CdrResult<()> {
+        self.take(n * 8, 8, what).map(|_| ())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn aligns_relative_to_the_payload_and_checks_bounds() {
+        // header, u32 7, string "ab" (len 3), pad to 8, f64 1.5
+        let mut b = vec![0, 1, 0, 0];
+        b.extend(7u32.to_le_bytes());
+        b.extend(3u32.to_le_bytes());
+        b.extend(b"ab\0");
+        b.extend([0; 5]);
+        b.extend(1.5f64.to_le_bytes());
+        let mut c = Cdr::new(&b).unwrap();
+        assert_eq!(c.u32("a").unwrap(), 7);
+        assert_eq!(c.string("s").unwrap(), "ab");
+        assert_eq!(c.f64("x").unwrap(), 1.5);
+        assert!(c.u32("past the end").unwrap_err().contains("truncated"));
+    }
+
+    #[test]
+    fn corrupt_lengths_are_errors() {
+        let mut b = vec![0, 1, 0, 0];
+        b.extend(u32::MAX.to_le_bytes());
+        assert!(Cdr::new(&b).unwrap().f32_seq("ranges").unwrap_err().contains("corrupt length"));
+        assert!(Cdr::new(&[0, 0, 0, 0]).unwrap_err().contains("big-endian"));
+        assert!(Cdr::new(&[0, 1]).is_err());
+    }
+}

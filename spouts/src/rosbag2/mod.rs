@@ -1,0 +1,139 @@
+//! ROS 2 bags: the `rosbag2` spout.
+//!
+//! Emits scans (with odometry interpolated at their stamps) on `scan` and
+//! the odometry stream on `odom`, merged in stamp order, as fast as possible
+//! or at the recorded rate times a factor.
+
+mod bag;
+mod cdr;
+pub mod messages;
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+
+pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag};
+
+use crate::carmen::Pace;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BagParams {
+    /// The bag folder or one .mcap file.
+    bag: PathBuf,
+    #[serde(default = "scan_topic")]
+    scan_topic: String,
+    #[serde(default = "odom_topic")]
+    odom_topic: String,
+    #[serde(default = "tf_static_topic")]
+    tf_static_topic: String,
+    /// `"max"` (the default) or a factor of the recorded rate.
+    #[serde(default)]
+    rate: Option<toml::Value>,
+    /// Stop after this many scans.
+    max_scans: Option<u64>,
+}
+
+fn scan_topic() -> String {
+    Topics::default().scan
+}
+fn odom_topic() -> String {
+    Topics::default().odom
+}
+fn tf_static_topic() -> String {
+    Topics::default().tf_static
+}
+
+/// Replays a ROS 2 bag.
+#[derive(Debug)]
+pub struct Rosbag2Spout {
+    bag: PathBuf,
+    topics: Topics,
+    pace: Pace,
+    max_scans: Option<u64>,
+    scans: VecDeque<LaserReading>,
+    odometry: VecDeque<Odometry>,
+    without_odometry: u64,
+    clock: Option<(Instant, f64)>,
+}
+
+impl Rosbag2Spout {
+    /// Builds the spout from its `params`.
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: BagParams = p.parse()?;
+        Ok(Rosbag2Spout {
+            bag: params.bag,
+            topics: Topics {
+                scan: params.scan_topic,
+                odom: params.odom_topic,
+                tf_static: params.tf_static_topic,
+            },
+            pace: crate::carmen::pace(params.rate.as_ref())?,
+            max_scans: params.max_scans,
+            scans: VecDeque::new(),
+            odometry: VecDeque::new(),
+            without_odometry: 0,
+            clock: None,
+        })
+    }
+}
+
+impl Spout for Rosbag2Spout {
+    fn declare(&self, d: &mut Declarer) {
+        d.output::<LaserReading>("scan").output::<Odometry>("odom");
+    }
+
+    async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        let readings = read_bag(&self.bag, &self.topics)?;
+        if readings.scans_without_odometry > 0 {
+            tracing::warn!(
+                bag = %self.bag.display(),
+                "{} scans lie outside the odometry stream and are not emitted",
+                readings.scans_without_odometry
+            );
+        }
+        let mut scans = readings.scans;
+        if let Some(m) = self.max_scans {
+            scans.truncate(usize::try_from(m).unwrap_or(usize::MAX));
+            // Odometry past the last emitted scan is not needed.
+            let end = scans.last().map_or(f64::NEG_INFINITY, |s| s.stamp);
+            self.odometry = readings.odometry.into_iter().filter(|o| o.stamp <= end).collect();
+        } else {
+            self.odometry = readings.odometry.into();
+        }
+        ctx.expect_emits((scans.len() + self.odometry.len()) as u64);
+        self.scans = scans.into();
+        self.without_odometry = readings.scans_without_odometry;
+        Ok(())
+    }
+
+    async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
+        let scan_first = match (self.scans.front(), self.odometry.front()) {
+            (None, None) => {
+                out.count("scans_without_odometry", self.without_odometry);
+                return Ok(SpoutStatus::Done);
+            }
+            (Some(_), None) => true,
+            (None, Some(_)) => false,
+            (Some(s), Some(o)) => s.stamp <= o.stamp,
+        };
+        let stamp = if scan_first { self.scans[0].stamp } else { self.odometry[0].stamp };
+        if let Pace::Recorded(factor) = self.pace {
+            let (start, first) = *self.clock.get_or_insert((Instant::now(), stamp));
+            let due = start + Duration::from_secs_f64(((stamp - first) / factor).max(0.0));
+            tokio::time::sleep_until(due.into()).await;
+        }
+        if scan_first {
+            let scan = self.scans.pop_front().expect("checked above");
+            out.emit("scan", scan).await?;
+        } else {
+            let odom = self.odometry.pop_front().expect("checked above");
+            out.emit("odom", odom).await?;
+        }
+        Ok(SpoutStatus::Continue)
+    }
+}
