@@ -319,3 +319,18 @@ fn log_and_bag_sources_run_in_a_topology() {
     assert!(text(&out.stderr).contains("/nonexistent.clf: cannot open"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_topology_writes_the_raw_odometry_trajectory_that_eval_scores() {
+    let dir = out_dir("odometry");
+    let out = squall(&["run", "examples/topologies/odometry.toml", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let tum = dir.join("trajectory.tum");
+    let relations = shared_data("laser/aces.relations");
+    let out = squall(&["eval", "--trajectory", tum.to_str().unwrap(), "--relations", &relations, "--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(v["matched"], 1279);
+    assert!((v["trans_mean"].as_f64().unwrap() - 0.549).abs() < 1e-3, "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

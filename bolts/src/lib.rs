@@ -6,4 +6,6 @@
 
 pub mod eval;
 pub mod geometry;
+pub mod map;
 pub mod sensor;
+pub mod sinks;

@@ -55,6 +55,15 @@ pub struct Odometry {
     pub angular_velocity: Real,
 }
 
+/// A pose estimate at a time (e.g. a filter's output for one reading).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseStamped {
+    /// Time, seconds.
+    pub stamp: f64,
+    /// The pose.
+    pub pose: Pose2,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,5 +14,6 @@ pub fn registry() -> Registry {
     wordcount::register(&mut r);
     sink::register(&mut r);
     squall_spouts::register(&mut r);
+    squall_bolts::sinks::register(&mut r);
     r
 }

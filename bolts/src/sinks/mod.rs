@@ -1,0 +1,27 @@
+//! Writers of results: map images, trajectories. Library functions, and the
+//! `sink.trajectory` and `sink.map` bolts that call them at the end of a run.
+//! Every file is written atomically.
+
+pub mod map_files;
+mod map_sink;
+mod trajectory_sink;
+
+use std::path::Path;
+
+pub use map_sink::MapSink;
+use squall_topology::Registry;
+use squall_topology::fsio::write_atomic;
+pub use trajectory_sink::TrajectorySink;
+
+use crate::eval::trajectory::Trajectory;
+
+/// Writes `trajectory` to `path` in TUM format (atomically).
+pub fn write_tum(trajectory: &Trajectory, path: &Path) -> std::io::Result<()> {
+    write_atomic(path, trajectory.to_tum().as_bytes())
+}
+
+/// Registers `sink.trajectory` and `sink.map`.
+pub fn register(r: &mut Registry) {
+    r.register_bolt("sink.trajectory", TrajectorySink::from_params);
+    r.register_bolt("sink.map", MapSink::from_params);
+}
