@@ -334,3 +334,31 @@ fn a_topology_writes_the_raw_odometry_trajectory_that_eval_scores() {
     assert!((v["trans_mean"].as_f64().unwrap() - 0.549).abs() < 1e-3, "{v}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn sim_writes_a_log_that_eval_and_topologies_read() {
+    let dir = out_dir("sim");
+    let out = squall(&["sim", "--duration", "120", "--seed", "4", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("1200 scans"), "{}", text(&out.stdout));
+    for f in ["sim.clf", "ground_truth.tum", "sim.relations", "world.png"] {
+        assert!(dir.join(f).exists(), "{f} missing");
+    }
+    let gt = dir.join("ground_truth.tum");
+    let rel = dir.join("sim.relations");
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        gt.to_str().unwrap(),
+        "--relations",
+        rel.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert!(v["trans_mean"].as_f64().unwrap() < 1e-5, "{v}");
+
+    let out = squall(&["sim", "--world", "nowhere.txt", "--out", dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("only the generated `office` world"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

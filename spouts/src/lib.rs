@@ -3,11 +3,13 @@
 
 pub mod carmen;
 pub mod rosbag2;
+pub mod sim;
 
 use squall_topology::Registry;
 
-/// Registers every source kind: `carmen`, `rosbag2`.
+/// Registers every source kind: `carmen`, `rosbag2`, `sim`.
 pub fn register(r: &mut Registry) {
+    r.register_spout("sim", sim::SimSpout::from_params);
     r.register_spout("carmen", carmen::CarmenSpout::from_params);
     r.register_spout("rosbag2", rosbag2::Rosbag2Spout::from_params);
 }

@@ -3,6 +3,7 @@
 mod eval;
 mod progress;
 mod run;
+mod sim;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -27,6 +28,7 @@ const EXIT_FAILED: u8 = 1;
         squall validate examples/topologies/wordcount.toml\n  \
         squall graph examples/topologies/wordcount.toml | dot -Tsvg > wc.svg\n  \
         squall eval --trajectory out/trajectory.tum --relations aces.relations\n  \
+        squall sim --world office --duration 600 --seed 1 --out out/sim\n  \
         squall kinds\n\n\
         Exit codes: 0 success, 1 the run failed, 2 invalid topology or arguments."
 )]
@@ -77,6 +79,9 @@ enum Command {
     /// Score a trajectory: the relation metric and/or errors against ground
     /// truth.
     Eval(eval::EvalArgs),
+    /// Simulate a robot exploring a world; write a CARMEN log, ground truth
+    /// and relations.
+    Sim(sim::SimArgs),
     /// List the component kinds this binary knows.
     Kinds,
 }
@@ -117,6 +122,7 @@ pub(crate) fn main() -> ExitCode {
             Err(code) => code,
         },
         Command::Eval(args) => eval::eval(&args),
+        Command::Sim(args) => sim::sim(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");

@@ -1,0 +1,236 @@
+//! The simulated robot: a differential drive that follows a seeded random
+//! walk over the floor's corridor graph (preferring corridors it has used
+//! least, so routes close loops), a laser by ray casting, and wheel odometry
+//! with a systematic scale and heading bias plus random noise.
+
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+use squall_bolts::geometry::{Pose2, Real, normalize_angle};
+use squall_bolts::sensor::{LaserReading, Odometry};
+
+use super::office::Floor;
+use super::rng::{gaussian, rng_for};
+
+/// What the simulator can be asked for. The defaults are those of
+/// [`SimConfig::default`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimConfig {
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Simulated time, seconds. The default is 600.
+    pub duration_secs: Real,
+    /// Laser beams over the field of view. The default is 180.
+    pub beams: usize,
+    /// Field of view, radians. The default is π.
+    pub fov: Real,
+    /// Laser range, metres; farther walls give no return. The default is 30.
+    pub range_max: Real,
+    /// Standard deviation of range noise, metres. The default is 0.01.
+    pub range_noise: Real,
+    /// Probability that a beam returns nothing. The default is 0.002.
+    pub dropout: Real,
+    /// Scans per second. The default is 10.
+    pub scan_hz: Real,
+    /// Top speed, m/s. The default is 0.6.
+    pub max_speed: Real,
+    /// Top turn rate, rad/s. The default is 0.8.
+    pub max_turn: Real,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            seed: 0,
+            duration_secs: 600.0,
+            beams: 180,
+            fov: PI,
+            range_max: 30.0,
+            range_noise: 0.01,
+            dropout: 0.002,
+            scan_hz: 10.0,
+            max_speed: 0.6,
+            max_turn: 0.8,
+        }
+    }
+}
+
+/// Physics steps per second.
+const PHYSICS_HZ: Real = 50.0;
+
+/// One output of the simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SimEvent {
+    /// A scan (odometry pose inside) and the true pose at its stamp.
+    Scan(LaserReading, Pose2),
+    /// An odometry message.
+    Odom(Odometry),
+}
+
+/// Runs the robot through the floor; an iterator of events in time order.
+#[derive(Debug)]
+pub struct Simulation {
+    floor: Floor,
+    config: SimConfig,
+    truth: Pose2,
+    odometry: Pose2,
+    step: u64,
+    steps: u64,
+    steps_per_scan: u64,
+    target: usize,
+    previous: usize,
+    visits: HashMap<(usize, usize), u32>,
+    route_rng: ChaCha8Rng,
+    odom_rng: ChaCha8Rng,
+    laser_rng: ChaCha8Rng,
+    /// Relative error of the odometry's distance (systematic).
+    scale_bias: Real,
+    /// Heading drift per metre driven, radians (systematic).
+    heading_bias: Real,
+    pending: Option<SimEvent>,
+}
+
+impl Simulation {
+    /// Starts the robot at the floor's first node, facing its first
+    /// neighbour.
+    pub fn new(floor: Floor, config: SimConfig) -> Self {
+        let mut bias_rng = rng_for(config.seed, "odometry bias");
+        let sign = |rng: &mut ChaCha8Rng| if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+        let scale_bias = sign(&mut bias_rng) * bias_rng.random_range(0.01..0.02);
+        let heading_bias = sign(&mut bias_rng) * bias_rng.random_range(0.15..0.35_f64).to_radians();
+        let start = floor.nodes[0];
+        let first = floor.neighbours(0).next().expect("the floor's graph is connected");
+        let heading = (floor.nodes[first].1 - start.1).atan2(floor.nodes[first].0 - start.0);
+        let truth = Pose2::new(start.0, start.1, heading);
+        let steps_per_scan = (PHYSICS_HZ / config.scan_hz).round().max(1.0) as u64;
+        Simulation {
+            steps: (config.duration_secs * PHYSICS_HZ) as u64,
+            route_rng: rng_for(config.seed, "route"),
+            odom_rng: rng_for(config.seed, "odometry noise"),
+            laser_rng: rng_for(config.seed, "laser noise"),
+            odometry: truth,
+            truth,
+            floor,
+            config,
+            step: 0,
+            steps_per_scan,
+            target: first,
+            previous: 0,
+            visits: HashMap::new(),
+            scale_bias,
+            heading_bias,
+            pending: None,
+        }
+    }
+
+    /// The floor being simulated.
+    pub fn floor(&self) -> &Floor {
+        &self.floor
+    }
+
+    fn stamp(&self) -> Real {
+        self.step as Real / PHYSICS_HZ
+    }
+
+    fn choose_next(&mut self) {
+        let here = self.target;
+        let options: Vec<usize> = self.floor.neighbours(here).filter(|&n| n != self.previous).collect();
+        let options = if options.is_empty() { vec![self.previous] } else { options };
+        let key = |a: usize, b: usize| (a.min(b), a.max(b));
+        let weights: Vec<Real> = options
+            .iter()
+            .map(|&n| 1.0 / (1.0 + Real::from(*self.visits.get(&key(here, n)).unwrap_or(&0))))
+            .collect();
+        let mut pick = self.route_rng.random::<Real>() * weights.iter().sum::<Real>();
+        let mut next = options[options.len() - 1];
+        for (&n, w) in options.iter().zip(&weights) {
+            if pick < *w {
+                next = n;
+                break;
+            }
+            pick -= w;
+        }
+        *self.visits.entry(key(here, next)).or_default() += 1;
+        self.previous = here;
+        self.target = next;
+    }
+
+    /// One physics step: steer to the target node, move, integrate the
+    /// noisy odometry.
+    fn advance(&mut self) {
+        let dt = 1.0 / PHYSICS_HZ;
+        let (tx, ty) = self.floor.nodes[self.target];
+        if (tx - self.truth.x).hypot(ty - self.truth.y) < 0.15 {
+            self.choose_next();
+        }
+        let (tx, ty) = self.floor.nodes[self.target];
+        let error = normalize_angle((ty - self.truth.y).atan2(tx - self.truth.x) - self.truth.theta);
+        let turn = (2.0 * error).clamp(-self.config.max_turn, self.config.max_turn);
+        let speed = self.config.max_speed * error.cos().max(0.0).powi(4);
+        let (d_trans, d_rot) = (speed * dt, turn * dt);
+        self.truth = self.truth.compose(&Pose2::new(d_trans, 0.0, d_rot));
+        let rng = &mut self.odom_rng;
+        let o_trans = d_trans * (1.0 + self.scale_bias) + 0.03 * d_trans.abs() * gaussian(rng);
+        let o_rot = d_rot
+            + self.heading_bias * d_trans.abs()
+            + (0.03 * d_rot.abs() + 0.01 * d_trans.abs()) * gaussian(rng);
+        self.odometry = self.odometry.compose(&Pose2::new(o_trans, 0.0, o_rot));
+        self.step += 1;
+    }
+
+    fn scan(&mut self) -> LaserReading {
+        let c = &self.config;
+        let increment = c.fov / (c.beams - 1) as Real;
+        let angle_min = -c.fov / 2.0;
+        let ranges = (0..c.beams)
+            .map(|i| {
+                let angle = self.truth.theta + angle_min + i as Real * increment;
+                let hit = self.floor.world.cast((self.truth.x, self.truth.y), angle, c.range_max);
+                let dropped = self.laser_rng.random_bool(c.dropout);
+                match hit {
+                    Some(r) if !dropped => {
+                        (r + c.range_noise * gaussian(&mut self.laser_rng)).max(0.0) as f32
+                    }
+                    _ => c.range_max as f32,
+                }
+            })
+            .collect();
+        LaserReading {
+            stamp: self.stamp(),
+            ranges,
+            angle_min,
+            angle_increment: increment,
+            range_min: 0.0,
+            range_max: c.range_max,
+            odometry: self.odometry,
+            laser_offset: Pose2::IDENTITY,
+        }
+    }
+}
+
+impl Iterator for Simulation {
+    type Item = SimEvent;
+
+    fn next(&mut self) -> Option<SimEvent> {
+        if let Some(e) = self.pending.take() {
+            return Some(e);
+        }
+        while self.step < self.steps {
+            self.advance();
+            if self.step % self.steps_per_scan == 0 {
+                let scan = self.scan();
+                let odom = Odometry {
+                    stamp: scan.stamp,
+                    pose: self.odometry,
+                    linear_velocity: 0.0,
+                    angular_velocity: 0.0,
+                };
+                self.pending = Some(SimEvent::Scan(scan, self.truth));
+                return Some(SimEvent::Odom(odom));
+            }
+        }
+        None
+    }
+}

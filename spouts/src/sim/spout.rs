@@ -1,0 +1,96 @@
+//! The `sim` spout: the simulator as a source. Streams `scan`
+//! (`LaserReading`), `odom` (`Odometry`) and `truth` (`PoseStamped`, the
+//! true pose at each scan).
+
+use serde::Deserialize;
+use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+
+use super::office::office;
+use super::robot::{SimConfig, SimEvent, Simulation};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct P {
+    /// `"office"` (generated from the seed). The default is `"office"`.
+    #[serde(default = "default_world")]
+    world: String,
+    /// Simulated seconds. The default is 600.
+    #[serde(default = "default_duration")]
+    duration_secs: f64,
+    /// Beams over 180°. The default is 180.
+    #[serde(default = "default_beams")]
+    beams: usize,
+    /// Seed; the default is the topology's seed.
+    seed: Option<u64>,
+}
+
+fn default_world() -> String {
+    "office".into()
+}
+fn default_duration() -> f64 {
+    600.0
+}
+fn default_beams() -> usize {
+    180
+}
+
+/// Emits a simulated run.
+#[derive(Debug)]
+pub struct SimSpout {
+    config: SimConfig,
+    sim: Option<Simulation>,
+}
+
+impl SimSpout {
+    /// Builds the spout from its `params`.
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: P = p.parse()?;
+        if params.world != "office" {
+            return Err(ParamError::new(format!(
+                "world \"{}\": only the generated \"office\" world can be simulated so far",
+                params.world
+            )));
+        }
+        if !(params.duration_secs.is_finite() && params.duration_secs > 0.0) || params.beams < 2 {
+            return Err(ParamError::new("duration_secs must be > 0 and beams at least 2"));
+        }
+        let config = SimConfig {
+            seed: params.seed.unwrap_or(p.seed()),
+            duration_secs: params.duration_secs,
+            beams: params.beams,
+            ..SimConfig::default()
+        };
+        Ok(SimSpout { config, sim: None })
+    }
+}
+
+impl Spout for SimSpout {
+    fn declare(&self, d: &mut Declarer) {
+        d.output::<LaserReading>("scan").output::<Odometry>("odom").output::<PoseStamped>("truth");
+    }
+
+    async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        let floor = office(self.config.seed, 3, 2);
+        ctx.expect_emits((self.config.duration_secs * self.config.scan_hz) as u64 * 3);
+        self.sim = Some(Simulation::new(floor, self.config.clone()));
+        Ok(())
+    }
+
+    async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
+        let sim = self.sim.as_mut().ok_or("the simulation was not opened")?;
+        match sim.next() {
+            None => Ok(SpoutStatus::Done),
+            Some(SimEvent::Odom(o)) => {
+                out.emit("odom", o).await?;
+                Ok(SpoutStatus::Continue)
+            }
+            Some(SimEvent::Scan(scan, truth)) => {
+                let stamp = scan.stamp;
+                out.emit("scan", scan).await?;
+                out.emit("truth", PoseStamped { stamp, pose: truth }).await?;
+                Ok(SpoutStatus::Continue)
+            }
+        }
+    }
+}

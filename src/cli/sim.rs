@@ -1,0 +1,72 @@
+//! `squall sim`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use squall_spouts::sim::office::office;
+use squall_spouts::sim::output::write_run;
+use squall_spouts::sim::{SimConfig, Simulation};
+
+use super::{EXIT_FAILED, EXIT_INVALID};
+
+#[derive(Debug, clap::Args)]
+pub(super) struct SimArgs {
+    /// The world: `office` (generated from the seed).
+    #[arg(long, default_value = "office")]
+    world: String,
+    /// Simulated seconds.
+    #[arg(long, default_value_t = 600.0)]
+    duration: f64,
+    /// Seed of the world, the route and every noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Laser beams over 180°.
+    #[arg(long, default_value_t = 180)]
+    beams: usize,
+    /// Output folder: sim.clf, ground_truth.tum, sim.relations, world.png.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+/// Runs `squall sim`.
+pub(super) fn sim(args: &SimArgs) -> ExitCode {
+    if args.world != "office" {
+        eprintln!(
+            "error: --world {}: only the generated `office` world can be simulated so far \
+             (line-map worlds need a route planner, which is not built yet)",
+            args.world
+        );
+        return ExitCode::from(EXIT_INVALID);
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) || args.beams < 2 {
+        eprintln!("error: --duration must be > 0 and --beams at least 2");
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let config = SimConfig {
+        seed: args.seed,
+        duration_secs: args.duration,
+        beams: args.beams,
+        ..SimConfig::default()
+    };
+    let started = Instant::now();
+    let sim = Simulation::new(office(args.seed, 3, 2), config);
+    match write_run(sim, &args.out) {
+        Ok(s) => {
+            println!(
+                "simulated {:.0} s in {:.2} s: {} scans, {} local and {} loop relations in {}",
+                args.duration,
+                started.elapsed().as_secs_f64(),
+                s.scans,
+                s.local_relations,
+                s.loop_relations,
+                args.out.display()
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: cannot write into {}: {e}", args.out.display());
+            ExitCode::from(EXIT_FAILED)
+        }
+    }
+}
