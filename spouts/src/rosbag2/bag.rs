@@ -16,9 +16,13 @@ use super::messages::{self, Transform};
 /// message get no pose: they are counted, not guessed.
 pub const MAX_EXTRAPOLATION: f64 = 0.2;
 
-/// Which topics to read.
+/// Which topics to read, and how strictly.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Topics {
+    /// Skip messages that do not decode (counted in
+    /// [`BagReadings::skipped`]) instead of failing. A malformed container
+    /// is always an error. The default is false.
+    pub skip_bad: bool,
     /// LaserScan topic. The default is `/scan`.
     pub scan: String,
     /// Odometry topic. The default is `/odom`.
@@ -29,7 +33,7 @@ pub struct Topics {
 
 impl Default for Topics {
     fn default() -> Self {
-        Topics { scan: "/scan".into(), odom: "/odom".into(), tf_static: "/tf_static".into() }
+        Topics { skip_bad: false, scan: "/scan".into(), odom: "/odom".into(), tf_static: "/tf_static".into() }
     }
 }
 
@@ -80,6 +84,8 @@ pub struct BagReadings {
     pub odometry: Vec<Odometry>,
     /// Scans outside the odometry stream's time span (not emitted).
     pub scans_without_odometry: u64,
+    /// Messages that did not decode, skipped with `skip_bad`.
+    pub skipped: u64,
 }
 
 fn mcap_files(path: &Path) -> Result<Vec<PathBuf>, BagError> {
@@ -109,6 +115,7 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
     let mut raw_scans = Vec::new();
     let mut odometry = Vec::new();
     let mut statics: Vec<Transform> = Vec::new();
+    let mut skipped = 0;
     for file in mcap_files(path)? {
         let bytes = std::fs::read(&file).map_err(|source| BagError::Io { path: file.clone(), source })?;
         let container = |index, e: mcap::McapError| BagError::Container {
@@ -142,24 +149,28 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
                     message.channel.message_encoding
                 )));
             }
-            match expected {
-                SCAN_TYPE => raw_scans.push(messages::laser_scan(&message.data).map_err(bad)?),
-                ODOM_TYPE => {
-                    let o = messages::odometry(&message.data).map_err(bad)?;
+            let decoded = match expected {
+                SCAN_TYPE => messages::laser_scan(&message.data).map(|m| raw_scans.push(m)),
+                ODOM_TYPE => messages::odometry(&message.data).map(|o| {
                     odometry.push(Odometry {
                         stamp: o.header.stamp,
                         pose: o.pose,
                         linear_velocity: o.linear_x,
                         angular_velocity: o.angular_z,
-                    });
-                }
-                _ => statics.extend(messages::tf_message(&message.data).map_err(bad)?),
+                    })
+                }),
+                _ => messages::tf_message(&message.data).map(|t| statics.extend(t)),
+            };
+            match decoded {
+                Ok(()) => {}
+                Err(_) if topics.skip_bad => skipped += 1,
+                Err(e) => return Err(bad(e)),
             }
         }
     }
     odometry.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
     raw_scans.sort_by(|a, b| a.header.stamp.total_cmp(&b.header.stamp));
-    let mut out = BagReadings { odometry, ..Default::default() };
+    let mut out = BagReadings { odometry, skipped, ..Default::default() };
     for scan in raw_scans {
         let Some(pose) = interpolate(&out.odometry, scan.header.stamp) else {
             out.scans_without_odometry += 1;

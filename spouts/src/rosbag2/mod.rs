@@ -36,6 +36,9 @@ struct BagParams {
     rate: Option<toml::Value>,
     /// Stop after this many scans.
     max_scans: Option<u64>,
+    /// Skip messages that do not decode (counted) instead of failing.
+    #[serde(default)]
+    skip_bad: bool,
 }
 
 fn scan_topic() -> String {
@@ -58,6 +61,7 @@ pub struct Rosbag2Spout {
     scans: VecDeque<LaserReading>,
     odometry: VecDeque<Odometry>,
     without_odometry: u64,
+    skipped: u64,
     clock: Option<(Instant, f64)>,
 }
 
@@ -68,6 +72,7 @@ impl Rosbag2Spout {
         Ok(Rosbag2Spout {
             bag: params.bag,
             topics: Topics {
+                skip_bad: params.skip_bad,
                 scan: params.scan_topic,
                 odom: params.odom_topic,
                 tf_static: params.tf_static_topic,
@@ -77,6 +82,7 @@ impl Rosbag2Spout {
             scans: VecDeque::new(),
             odometry: VecDeque::new(),
             without_odometry: 0,
+            skipped: 0,
             clock: None,
         })
     }
@@ -108,6 +114,7 @@ impl Spout for Rosbag2Spout {
         ctx.expect_emits((scans.len() + self.odometry.len()) as u64);
         self.scans = scans.into();
         self.without_odometry = readings.scans_without_odometry;
+        self.skipped = readings.skipped;
         Ok(())
     }
 
@@ -115,6 +122,7 @@ impl Spout for Rosbag2Spout {
         let scan_first = match (self.scans.front(), self.odometry.front()) {
             (None, None) => {
                 out.count("scans_without_odometry", self.without_odometry);
+                out.count("records_skipped", self.skipped);
                 return Ok(SpoutStatus::Done);
             }
             (Some(_), None) => true,
