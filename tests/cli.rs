@@ -359,6 +359,13 @@ fn sim_writes_a_log_that_eval_and_topologies_read() {
 
     let out = squall(&["sim", "--world", "nowhere.txt", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(text(&out.stderr).contains("only the generated `office` world"), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("nowhere.txt: cannot read"), "{}", text(&out.stderr));
+
+    // A real building's line map.
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let out =
+        squall(&["sim", "--world", &map, "--duration", "60", "--seed", "1", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("600 scans"), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&dir);
 }

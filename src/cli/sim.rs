@@ -4,15 +4,15 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use squall_spouts::sim::office::office;
 use squall_spouts::sim::output::write_run;
-use squall_spouts::sim::{SimConfig, Simulation};
+use squall_spouts::sim::{SimConfig, Simulation, floor_for};
 
 use super::{EXIT_FAILED, EXIT_INVALID};
 
 #[derive(Debug, clap::Args)]
 pub(super) struct SimArgs {
-    /// The world: `office` (generated from the seed).
+    /// The world: `office` (generated from the seed) or a line-map file
+    /// (`x1,y1,x2,y2` per line, metres).
     #[arg(long, default_value = "office")]
     world: String,
     /// Simulated seconds.
@@ -31,14 +31,6 @@ pub(super) struct SimArgs {
 
 /// Runs `squall sim`.
 pub(super) fn sim(args: &SimArgs) -> ExitCode {
-    if args.world != "office" {
-        eprintln!(
-            "error: --world {}: only the generated `office` world can be simulated so far \
-             (line-map worlds need a route planner, which is not built yet)",
-            args.world
-        );
-        return ExitCode::from(EXIT_INVALID);
-    }
     if !(args.duration.is_finite() && args.duration > 0.0) || args.beams < 2 {
         eprintln!("error: --duration must be > 0 and --beams at least 2");
         return ExitCode::from(EXIT_INVALID);
@@ -50,7 +42,14 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
         ..SimConfig::default()
     };
     let started = Instant::now();
-    let sim = Simulation::new(office(args.seed, 3, 2), config);
+    let floor = match floor_for(&args.world, args.seed) {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let sim = Simulation::new(floor, config);
     match write_run(sim, &args.out) {
         Ok(s) => {
             println!(

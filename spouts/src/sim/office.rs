@@ -12,15 +12,28 @@ use super::world::{Segment, World};
 pub const CORRIDOR_WIDTH: Real = 2.0;
 const DOOR_WIDTH: Real = 1.0;
 
-/// A world with a graph of corridor intersections to drive along.
+/// How the robot chooses where to go on a floor's graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    /// At each node, a random next corridor (least used first): for graphs
+    /// of long corridors.
+    RandomWalk,
+    /// Drive the shortest path to a rarely visited node, then pick another:
+    /// for dense roadmaps.
+    Explore,
+}
+
+/// A world with a graph of places to drive between.
 #[derive(Debug, Clone)]
 pub struct Floor {
     /// The walls.
     pub world: World,
     /// Corridor intersections (centre points), metres.
     pub nodes: Vec<(Real, Real)>,
-    /// Pairs of node indices joined by a straight corridor.
+    /// Pairs of node indices joined by a straight, clear path.
     pub edges: Vec<(usize, usize)>,
+    /// How routes are chosen.
+    pub route: Route,
 }
 
 impl Floor {
@@ -148,7 +161,7 @@ pub fn office(seed: u64, columns: usize, rows: usize) -> Floor {
             }
         }
     }
-    Floor { world: World { walls }, nodes, edges }
+    Floor { world: World { walls }, nodes, edges, route: Route::RandomWalk }
 }
 
 #[cfg(test)]

@@ -3,7 +3,7 @@
 //! least, so routes close loops), a laser by ray casting, and wheel odometry
 //! with a systematic scale and heading bias plus random noise.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::f64::consts::PI;
 
 use rand::RngExt;
@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use squall_bolts::geometry::{Pose2, Real, normalize_angle};
 use squall_bolts::sensor::{LaserReading, Odometry};
 
-use super::office::Floor;
+use super::office::{Floor, Route};
 use super::rng::{gaussian, rng_for};
 
 /// What the simulator can be asked for. The defaults are those of
@@ -82,6 +82,8 @@ pub struct Simulation {
     target: usize,
     previous: usize,
     visits: HashMap<(usize, usize), u32>,
+    node_visits: Vec<u32>,
+    plan: VecDeque<usize>,
     route_rng: ChaCha8Rng,
     odom_rng: ChaCha8Rng,
     laser_rng: ChaCha8Rng,
@@ -105,6 +107,7 @@ impl Simulation {
         let heading = (floor.nodes[first].1 - start.1).atan2(floor.nodes[first].0 - start.0);
         let truth = Pose2::new(start.0, start.1, heading);
         let steps_per_scan = (PHYSICS_HZ / config.scan_hz).round().max(1.0) as u64;
+        let floor_nodes = floor.nodes.len();
         Simulation {
             steps: (config.duration_secs * PHYSICS_HZ) as u64,
             route_rng: rng_for(config.seed, "route"),
@@ -119,6 +122,8 @@ impl Simulation {
             target: first,
             previous: 0,
             visits: HashMap::new(),
+            node_visits: vec![0; floor_nodes],
+            plan: VecDeque::new(),
             scale_bias,
             heading_bias,
             pending: None,
@@ -135,13 +140,27 @@ impl Simulation {
     }
 
     fn choose_next(&mut self) {
+        self.node_visits[self.target] += 1;
+        if self.floor.route == Route::Explore {
+            return self.explore_next();
+        }
         let here = self.target;
         let options: Vec<usize> = self.floor.neighbours(here).filter(|&n| n != self.previous).collect();
         let options = if options.is_empty() { vec![self.previous] } else { options };
         let key = |a: usize, b: usize| (a.min(b), a.max(b));
+        let nodes = &self.floor.nodes;
+        let heading =
+            |from: usize, to: usize| (nodes[to].1 - nodes[from].1).atan2(nodes[to].0 - nodes[from].0);
+        let arriving = heading(self.previous, here);
+        // Least-used corridors first (routes close loops), and straight on
+        // rather than turning (no zig-zag on a dense roadmap).
         let weights: Vec<Real> = options
             .iter()
-            .map(|&n| 1.0 / (1.0 + Real::from(*self.visits.get(&key(here, n)).unwrap_or(&0))))
+            .map(|&n| {
+                let visits = Real::from(*self.visits.get(&key(here, n)).unwrap_or(&0));
+                let straightness = (1.0 + normalize_angle(heading(here, n) - arriving).cos()) / 2.0;
+                (0.1 + straightness * straightness) / (1.0 + visits)
+            })
             .collect();
         let mut pick = self.route_rng.random::<Real>() * weights.iter().sum::<Real>();
         let mut next = options[options.len() - 1];
@@ -155,6 +174,61 @@ impl Simulation {
         *self.visits.entry(key(here, next)).or_default() += 1;
         self.previous = here;
         self.target = next;
+    }
+
+    /// Next node on the way to a rarely visited place; a new place when the
+    /// last one is reached.
+    fn explore_next(&mut self) {
+        let here = self.target;
+        if self.plan.is_empty() {
+            let n = self.floor.nodes.len();
+            let goal = (0..12)
+                .map(|_| self.route_rng.random_range(0..n))
+                .min_by_key(|&g| (self.node_visits[g], usize::MAX - g))
+                .expect("12 candidates");
+            self.plan = self.shortest_path(here, goal);
+        }
+        // String pulling: skip plan nodes while the straight line stays clear.
+        let nodes = &self.floor.nodes;
+        let mut skipped = 0;
+        while skipped < 8 && self.plan.len() >= 2 && self.floor.world.clear(nodes[here], nodes[self.plan[1]])
+        {
+            self.plan.pop_front();
+            skipped += 1;
+        }
+        self.previous = here;
+        self.target = self.plan.pop_front().unwrap_or(self.previous);
+    }
+
+    /// Nodes after `from` on a shortest (fewest edges) path to `to`.
+    fn shortest_path(&self, from: usize, to: usize) -> VecDeque<usize> {
+        let n = self.floor.nodes.len();
+        let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for &(a, b) in &self.floor.edges {
+            adjacency[a].push(b);
+            adjacency[b].push(a);
+        }
+        let mut parent = vec![usize::MAX; n];
+        parent[from] = from;
+        let mut queue = VecDeque::from([from]);
+        while let Some(v) = queue.pop_front() {
+            if v == to {
+                break;
+            }
+            for &w in &adjacency[v] {
+                if parent[w] == usize::MAX {
+                    parent[w] = v;
+                    queue.push_back(w);
+                }
+            }
+        }
+        let mut path = VecDeque::new();
+        let mut v = to;
+        while parent[v] != usize::MAX && v != from {
+            path.push_front(v);
+            v = parent[v];
+        }
+        path
     }
 
     /// One physics step: steer to the target node, move, integrate the

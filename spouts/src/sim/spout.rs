@@ -6,13 +6,13 @@ use serde::Deserialize;
 use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
-use super::office::office;
 use super::robot::{SimConfig, SimEvent, Simulation};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct P {
-    /// `"office"` (generated from the seed). The default is `"office"`.
+    /// `"office"` (generated from the seed) or a line-map file. The default
+    /// is `"office"`.
     #[serde(default = "default_world")]
     world: String,
     /// Simulated seconds. The default is 600.
@@ -38,6 +38,7 @@ fn default_beams() -> usize {
 /// Emits a simulated run.
 #[derive(Debug)]
 pub struct SimSpout {
+    world: String,
     config: SimConfig,
     sim: Option<Simulation>,
 }
@@ -46,12 +47,6 @@ impl SimSpout {
     /// Builds the spout from its `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: P = p.parse()?;
-        if params.world != "office" {
-            return Err(ParamError::new(format!(
-                "world \"{}\": only the generated \"office\" world can be simulated so far",
-                params.world
-            )));
-        }
         if !(params.duration_secs.is_finite() && params.duration_secs > 0.0) || params.beams < 2 {
             return Err(ParamError::new("duration_secs must be > 0 and beams at least 2"));
         }
@@ -61,7 +56,7 @@ impl SimSpout {
             beams: params.beams,
             ..SimConfig::default()
         };
-        Ok(SimSpout { config, sim: None })
+        Ok(SimSpout { world: params.world, config, sim: None })
     }
 }
 
@@ -71,7 +66,7 @@ impl Spout for SimSpout {
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
-        let floor = office(self.config.seed, 3, 2);
+        let floor = super::floor_for(&self.world, self.config.seed)?;
         ctx.expect_emits((self.config.duration_secs * self.config.scan_hz) as u64 * 3);
         self.sim = Some(Simulation::new(floor, self.config.clone()));
         Ok(())

@@ -1,0 +1,137 @@
+//! Routes through an arbitrary line map: a roadmap of free points on a grid
+//! (clear of walls by a margin, and enclosed by walls so the robot stays
+//! inside the building), joined to their grid neighbours when the straight
+//! path between them is clear. The largest connected part is kept.
+
+use std::collections::VecDeque;
+
+use squall_bolts::geometry::Real;
+
+use super::office::{Floor, Route};
+use super::world::World;
+
+/// Distance from point `p` to the segment `a`–`b`.
+fn point_segment(p: (Real, Real), a: (Real, Real), b: (Real, Real)) -> Real {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 == 0.0 { 0.0 } else { (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0) };
+    (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
+}
+
+fn clearance(world: &World, p: (Real, Real)) -> Real {
+    world.walls.iter().map(|w| point_segment(p, w.a, w.b)).fold(Real::MAX, Real::min)
+}
+
+/// Whether walls surround `p`: at least 13 of 16 rays hit one. Points
+/// outside a building see open space over half the circle or more; points
+/// inside may look out through a few gaps (doors, holes in the map).
+fn enclosed(world: &World, p: (Real, Real), reach: Real) -> bool {
+    let hits =
+        (0..16).filter(|&k| world.cast(p, k as Real * std::f64::consts::PI / 8.0, reach).is_some()).count();
+    hits >= 13
+}
+
+/// Builds a roadmap with points every `spacing` metres at least `margin`
+/// metres from any wall. Errors when no free, enclosed space is found.
+pub fn roadmap(world: World, spacing: Real, margin: Real) -> Result<Floor, String> {
+    let (x0, y0, x1, y1) = world.bounds();
+    let reach = (x1 - x0).hypot(y1 - y0);
+    let (nx, ny) = (((x1 - x0) / spacing) as usize + 1, ((y1 - y0) / spacing) as usize + 1);
+    let mut id = vec![usize::MAX; nx * ny];
+    let mut nodes = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            let p = (x0 + i as Real * spacing, y0 + j as Real * spacing);
+            if clearance(&world, p) >= margin && enclosed(&world, p, reach) {
+                id[j * nx + i] = nodes.len();
+                nodes.push(p);
+            }
+        }
+    }
+    let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
+    for j in 0..ny {
+        for i in 0..nx {
+            let a = id[j * nx + i];
+            if a == usize::MAX {
+                continue;
+            }
+            for (di, dj) in [(1i64, 0i64), (0, 1), (1, 1), (-1, 1)] {
+                let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                if ni < 0 || ni >= nx as i64 || nj >= ny as i64 {
+                    continue;
+                }
+                let b = id[nj as usize * nx + ni as usize];
+                if b == usize::MAX {
+                    continue;
+                }
+                let mid = ((nodes[a].0 + nodes[b].0) / 2.0, (nodes[a].1 + nodes[b].1) / 2.0);
+                if world.clear(nodes[a], nodes[b]) && clearance(&world, mid) >= margin {
+                    adjacency[a].push(b);
+                    adjacency[b].push(a);
+                }
+            }
+        }
+    }
+    // Keep the largest connected component.
+    let mut component = vec![usize::MAX; nodes.len()];
+    let mut best = (0, 0);
+    for start in 0..nodes.len() {
+        if component[start] != usize::MAX {
+            continue;
+        }
+        let mut size = 0;
+        let mut queue = VecDeque::from([start]);
+        component[start] = start;
+        while let Some(n) = queue.pop_front() {
+            size += 1;
+            for &m in &adjacency[n] {
+                if component[m] == usize::MAX {
+                    component[m] = start;
+                    queue.push_back(m);
+                }
+            }
+        }
+        if size > best.1 {
+            best = (start, size);
+        }
+    }
+    if best.1 < 2 {
+        return Err(format!(
+            "no free space inside the walls: no two points {spacing} m apart with {margin} m clearance"
+        ));
+    }
+    let mut new_id = vec![usize::MAX; nodes.len()];
+    let mut kept = Vec::new();
+    for (n, p) in nodes.iter().enumerate() {
+        if component[n] == best.0 {
+            new_id[n] = kept.len();
+            kept.push(*p);
+        }
+    }
+    let mut edges = Vec::new();
+    for (a, list) in adjacency.iter().enumerate() {
+        for &b in list {
+            if a < b && new_id[a] != usize::MAX {
+                edges.push((new_id[a], new_id[b]));
+            }
+        }
+    }
+    Ok(Floor { world, nodes: kept, edges, route: Route::Explore })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_closed_room_gets_an_inside_roadmap_only() {
+        // A 6 × 4 m room with a 1 m wall stub; the outside is open space.
+        let world = World::parse_linemap("room", "0,0,6,0\n6,0,6,4\n6,4,0,4\n0,4,0,0\n3,0,3,1\n").unwrap();
+        let floor = roadmap(world, 0.5, 0.4).unwrap();
+        assert!(floor.nodes.len() > 20);
+        assert!(floor.nodes.iter().all(|&(x, y)| x > 0.3 && x < 5.7 && y > 0.3 && y < 3.7));
+        for &(a, b) in &floor.edges {
+            assert!(floor.world.clear(floor.nodes[a], floor.nodes[b]));
+        }
+    }
+}
