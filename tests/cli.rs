@@ -369,3 +369,34 @@ fn sim_writes_a_log_that_eval_and_topologies_read() {
     assert!(text(&out.stdout).contains("600 scans"), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_sim_spout_feeds_a_topology() {
+    let dir = out_dir("simrun");
+    let out = squall(&[
+        "run",
+        "examples/topologies/sim.toml",
+        "--set",
+        "source.params.duration_secs=60",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (odom, truth) = (dir.join("odometry.tum"), dir.join("truth.tum"));
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        odom.to_str().unwrap(),
+        "--ground-truth",
+        truth.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(v["pairs"], 600);
+    assert!(v["ate_rmse"].as_f64().unwrap() > 0.0, "odometry drifts from the truth: {v}");
+
+    let out = squall(&["validate", "examples/topologies/sim.toml", "--set", "source.params.fov_deg=0"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("field of view must be in (0°, 360°]"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

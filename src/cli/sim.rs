@@ -21,9 +21,15 @@ pub(super) struct SimArgs {
     /// Seed of the world, the route and every noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Laser beams over 180°.
+    /// Laser beams over the field of view.
     #[arg(long, default_value_t = 180)]
     beams: usize,
+    /// Laser field of view, degrees.
+    #[arg(long, default_value_t = 180.0)]
+    fov_deg: f64,
+    /// Laser range, metres (farther walls give no return).
+    #[arg(long, default_value_t = 30.0)]
+    range_max: f64,
     /// Output folder: sim.clf, ground_truth.tum, sim.relations, world.png.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,

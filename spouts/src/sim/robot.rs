@@ -57,6 +57,30 @@ impl Default for SimConfig {
     }
 }
 
+impl SimConfig {
+    /// Checks every setting's range; says which is wrong.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = |v: Real| v.is_finite() && v > 0.0;
+        if !positive(self.duration_secs) {
+            return Err(format!("duration must be > 0 s, got {}", self.duration_secs));
+        }
+        if self.beams < 2 {
+            return Err(format!("beams must be at least 2, got {}", self.beams));
+        }
+        if !(positive(self.fov) && self.fov <= 2.0 * PI) {
+            return Err(format!("field of view must be in (0°, 360°], got {}°", self.fov.to_degrees()));
+        }
+        let noise_ok = self.range_noise.is_finite() && self.range_noise >= 0.0;
+        if !positive(self.range_max) || !noise_ok || !(0.0..=1.0).contains(&self.dropout) {
+            return Err("range_max must be > 0, range_noise ≥ 0 and dropout in [0, 1]".to_string());
+        }
+        if !positive(self.scan_hz) || !positive(self.max_speed) || !positive(self.max_turn) {
+            return Err("scan rate, speed and turn rate must be > 0".to_string());
+        }
+        Ok(())
+    }
+}
+
 /// Physics steps per second.
 const PHYSICS_HZ: Real = 50.0;
 

@@ -18,9 +18,15 @@ struct P {
     /// Simulated seconds. The default is 600.
     #[serde(default = "default_duration")]
     duration_secs: f64,
-    /// Beams over 180°. The default is 180.
+    /// Beams over the field of view. The default is 180.
     #[serde(default = "default_beams")]
     beams: usize,
+    /// Field of view, degrees. The default is 180.
+    #[serde(default = "default_fov")]
+    fov_deg: f64,
+    /// Laser range, metres. The default is 30.
+    #[serde(default = "default_range")]
+    range_max: f64,
     /// Seed; the default is the topology's seed.
     seed: Option<u64>,
 }
@@ -33,6 +39,12 @@ fn default_duration() -> f64 {
 }
 fn default_beams() -> usize {
     180
+}
+fn default_fov() -> f64 {
+    180.0
+}
+fn default_range() -> f64 {
+    30.0
 }
 
 /// Emits a simulated run.
@@ -47,15 +59,15 @@ impl SimSpout {
     /// Builds the spout from its `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: P = p.parse()?;
-        if !(params.duration_secs.is_finite() && params.duration_secs > 0.0) || params.beams < 2 {
-            return Err(ParamError::new("duration_secs must be > 0 and beams at least 2"));
-        }
         let config = SimConfig {
             seed: params.seed.unwrap_or(p.seed()),
             duration_secs: params.duration_secs,
             beams: params.beams,
+            fov: params.fov_deg.to_radians(),
+            range_max: params.range_max,
             ..SimConfig::default()
         };
+        config.check().map_err(ParamError::new)?;
         Ok(SimSpout { world: params.world, config, sim: None })
     }
 }
