@@ -6,6 +6,8 @@
 
 pub mod eval;
 pub mod geometry;
+pub mod linemap;
 pub mod map;
 pub mod sensor;
 pub mod sinks;
+pub mod textfile;

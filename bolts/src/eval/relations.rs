@@ -11,6 +11,7 @@ use serde::Serialize;
 use crate::eval::mean_std;
 use crate::eval::trajectory::{Trajectory, TrajectoryError};
 use crate::geometry::{Pose2, normalize_angle};
+use crate::textfile;
 
 /// How far (s) a trajectory stamp may be from a relation's stamp to match.
 pub const STAMP_TOLERANCE: f64 = 1e-3;
@@ -28,30 +29,15 @@ pub struct Relation {
 
 /// Parses a relations file; `path` names it in errors.
 pub fn parse_relations(path: &str, text: &str) -> Result<Vec<Relation>, TrajectoryError> {
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let bad = |message: String| TrajectoryError::Bad { path: path.to_string(), line: i + 1, message };
-        let v: Vec<f64> = line
-            .split_ascii_whitespace()
-            .map(|f| f.parse::<f64>().map_err(|_| bad(format!("expected a number, found \"{f}\""))))
-            .collect::<Result<_, _>>()?;
-        if v.len() != 8 {
-            return Err(bad(format!("expected 8 fields (t1 t2 x y z roll pitch yaw), found {}", v.len())));
-        }
-        out.push(Relation { t1: v[0], t2: v[1], motion: Pose2::new(v[2], v[3], v[7]) });
-    }
-    Ok(out)
+    Ok(textfile::numeric_lines(path, text, 8, "t1 t2 x y z roll pitch yaw", false)?
+        .into_iter()
+        .map(|(_, v)| Relation { t1: v[0], t2: v[1], motion: Pose2::new(v[2], v[3], v[7]) })
+        .collect())
 }
 
 /// Reads a relations file.
 pub fn read_relations(path: &std::path::Path) -> Result<Vec<Relation>, TrajectoryError> {
-    let name = path.display().to_string();
-    let text =
-        std::fs::read_to_string(path).map_err(|source| TrajectoryError::Io { path: name.clone(), source })?;
+    let (name, text) = textfile::read(path)?;
     parse_relations(&name, &text)
 }
 

@@ -5,29 +5,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::geometry::Pose2;
+use crate::textfile::{self, TextFileError};
 
-/// A problem in a trajectory file.
-#[derive(Debug, thiserror::Error)]
-pub enum TrajectoryError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// A line is malformed.
-    #[error("{path}:{line}: {message}")]
-    Bad {
-        /// The file.
-        path: String,
-        /// 1-based line.
-        line: usize,
-        /// What was expected.
-        message: String,
-    },
-}
+/// A problem in a trajectory or relations file.
+pub type TrajectoryError = TextFileError;
 
 /// Poses with their stamps, in time order.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -85,22 +66,14 @@ impl Trajectory {
     /// the quaternion.
     pub fn parse_tum(path: &str, text: &str) -> Result<Self, TrajectoryError> {
         let mut t = Trajectory::default();
-        for (i, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
-                continue;
-            }
-            let bad = |message: String| TrajectoryError::Bad { path: path.to_string(), line: i + 1, message };
-            let v: Vec<f64> = line
-                .split_ascii_whitespace()
-                .map(|f| f.parse::<f64>().map_err(|_| bad(format!("expected a number, found \"{f}\""))))
-                .collect::<Result<_, _>>()?;
-            if v.len() != 8 {
-                return Err(bad(format!("expected 8 fields (t x y z qx qy qz qw), found {}", v.len())));
-            }
+        for (line, v) in textfile::numeric_lines(path, text, 8, "t x y z qx qy qz qw", false)? {
             if let Some(&last) = t.stamps.last() {
                 if v[0] < last {
-                    return Err(bad(format!("stamps must not go back in time ({} after {last})", v[0])));
+                    return Err(TextFileError::Bad {
+                        path: path.to_string(),
+                        line,
+                        message: format!("stamps must not go back in time ({} after {last})", v[0]),
+                    });
                 }
             }
             let (qx, qy, qz, qw) = (v[4], v[5], v[6], v[7]);
@@ -112,9 +85,7 @@ impl Trajectory {
 
     /// Reads a TUM file.
     pub fn read_tum(path: &Path) -> Result<Self, TrajectoryError> {
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| TrajectoryError::Io { path: name.clone(), source })?;
+        let (name, text) = textfile::read(path)?;
         Self::parse_tum(&name, &text)
     }
 }

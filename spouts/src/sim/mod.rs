@@ -7,7 +7,6 @@ mod rng;
 pub mod roadmap;
 pub mod robot;
 mod spout;
-pub mod world;
 
 pub use robot::{SimConfig, SimEvent, Simulation};
 pub use spout::SimSpout;
@@ -23,6 +22,7 @@ pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor, String> {
     if world == "office" {
         return Ok(office::office(seed, 3, 2));
     }
-    let walls = world::World::load_linemap(std::path::Path::new(world)).map_err(|e| e.to_string())?;
+    let walls =
+        squall_bolts::linemap::LineMap::load(std::path::Path::new(world)).map_err(|e| e.to_string())?;
     roadmap::roadmap(walls, ROADMAP_SPACING, ROADMAP_MARGIN).map_err(|e| format!("{world}: {e}"))
 }

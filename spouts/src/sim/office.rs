@@ -6,7 +6,7 @@ use rand::RngExt;
 use squall_bolts::geometry::Real;
 
 use super::rng::rng_for;
-use super::world::{Segment, World};
+use squall_bolts::linemap::{LineMap, Segment};
 
 /// Corridor width, metres.
 pub const CORRIDOR_WIDTH: Real = 2.0;
@@ -27,7 +27,7 @@ pub enum Route {
 #[derive(Debug, Clone)]
 pub struct Floor {
     /// The walls.
-    pub world: World,
+    pub world: LineMap,
     /// Corridor intersections (centre points), metres.
     pub nodes: Vec<(Real, Real)>,
     /// Pairs of node indices joined by a straight, clear path.
@@ -161,7 +161,7 @@ pub fn office(seed: u64, columns: usize, rows: usize) -> Floor {
             }
         }
     }
-    Floor { world: World { walls }, nodes, edges, route: Route::RandomWalk }
+    Floor { world: LineMap { walls }, nodes, edges, route: Route::RandomWalk }
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@ use squall_bolts::sinks::map_files::write_png;
 use squall_topology::fsio::write_atomic;
 
 use super::robot::{SimEvent, Simulation};
-use super::world::World;
+use squall_bolts::linemap::LineMap;
 
 /// Local relations join scans this far apart along the true path, metres.
 pub const LOCAL_RELATION_METRES: Real = 1.0;
@@ -133,7 +133,7 @@ pub fn relations(t: &Trajectory) -> (String, usize, usize) {
 
 /// The walls drawn into a grid of `resolution` metres: wall cells occupied,
 /// the rest free.
-pub fn rasterize(world: &World, resolution: Real) -> OccupancyGrid {
+pub fn rasterize(world: &LineMap, resolution: Real) -> OccupancyGrid {
     let (x0, y0, x1, y1) = world.bounds();
     let margin = 1.0;
     let width = ((x1 - x0 + 2.0 * margin) / resolution).ceil() as usize;

@@ -8,7 +8,7 @@ use std::collections::VecDeque;
 use squall_bolts::geometry::Real;
 
 use super::office::{Floor, Route};
-use super::world::World;
+use squall_bolts::linemap::LineMap;
 
 /// Distance from point `p` to the segment `a`–`b`.
 fn point_segment(p: (Real, Real), a: (Real, Real), b: (Real, Real)) -> Real {
@@ -18,14 +18,14 @@ fn point_segment(p: (Real, Real), a: (Real, Real), b: (Real, Real)) -> Real {
     (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
 }
 
-fn clearance(world: &World, p: (Real, Real)) -> Real {
+fn clearance(world: &LineMap, p: (Real, Real)) -> Real {
     world.walls.iter().map(|w| point_segment(p, w.a, w.b)).fold(Real::MAX, Real::min)
 }
 
 /// Whether walls surround `p`: at least 13 of 16 rays hit one. Points
 /// outside a building see open space over half the circle or more; points
 /// inside may look out through a few gaps (doors, holes in the map).
-fn enclosed(world: &World, p: (Real, Real), reach: Real) -> bool {
+fn enclosed(world: &LineMap, p: (Real, Real), reach: Real) -> bool {
     let hits =
         (0..16).filter(|&k| world.cast(p, k as Real * std::f64::consts::PI / 8.0, reach).is_some()).count();
     hits >= 13
@@ -33,7 +33,7 @@ fn enclosed(world: &World, p: (Real, Real), reach: Real) -> bool {
 
 /// Builds a roadmap with points every `spacing` metres at least `margin`
 /// metres from any wall. Errors when no free, enclosed space is found.
-pub fn roadmap(world: World, spacing: Real, margin: Real) -> Result<Floor, String> {
+pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, String> {
     let (x0, y0, x1, y1) = world.bounds();
     let reach = (x1 - x0).hypot(y1 - y0);
     let (nx, ny) = (((x1 - x0) / spacing) as usize + 1, ((y1 - y0) / spacing) as usize + 1);
@@ -126,7 +126,7 @@ mod tests {
     #[test]
     fn a_closed_room_gets_an_inside_roadmap_only() {
         // A 6 × 4 m room with a 1 m wall stub; the outside is open space.
-        let world = World::parse_linemap("room", "0,0,6,0\n6,0,6,4\n6,4,0,4\n0,4,0,0\n3,0,3,1\n").unwrap();
+        let world = LineMap::parse("room", "0,0,6,0\n6,0,6,4\n6,4,0,4\n0,4,0,0\n3,0,3,1\n").unwrap();
         let floor = roadmap(world, 0.5, 0.4).unwrap();
         assert!(floor.nodes.len() > 20);
         assert!(floor.nodes.iter().all(|&(x, y)| x > 0.3 && x < 5.7 && y > 0.3 && y < 3.7));

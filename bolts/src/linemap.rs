@@ -1,9 +1,11 @@
-//! A 2-D world of wall segments: loaded from a line-map file or generated,
-//! and ray cast by the simulated laser.
+//! Line maps: a building as wall segments, loaded from a file or generated,
+//! and ray cast (by the simulated laser, and by localization's observable
+//! scenes).
 
 use std::path::Path;
 
-use squall_bolts::geometry::Real;
+use crate::geometry::Real;
+use crate::textfile::{self, TextFileError};
 
 /// A wall from `a` to `b`, metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -14,75 +16,35 @@ pub struct Segment {
     pub b: (Real, Real),
 }
 
-/// A problem in a line-map file.
-#[derive(Debug, thiserror::Error)]
-pub enum WorldError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// A line is malformed.
-    #[error("{path}:{line}: {message}")]
-    Bad {
-        /// The file.
-        path: String,
-        /// 1-based line.
-        line: usize,
-        /// What was expected.
-        message: String,
-    },
-    /// The file holds no wall.
-    #[error("{0}: the map has no wall segments")]
-    Empty(String),
-}
-
-/// The walls of a world.
+/// The walls of a building.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct World {
+pub struct LineMap {
     /// Every wall; zero-length segments are kept (they never hit a ray).
     pub walls: Vec<Segment>,
 }
 
-impl World {
+impl LineMap {
     /// Parses a line map: one wall per line, `x1,y1,x2,y2` (commas and/or
     /// spaces), metres; `#` comments and blank lines ignored.
-    pub fn parse_linemap(path: &str, text: &str) -> Result<World, WorldError> {
-        let mut walls = Vec::new();
-        for (i, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
-                continue;
-            }
-            let bad = |message: String| WorldError::Bad { path: path.to_string(), line: i + 1, message };
-            let v: Vec<Real> = line
-                .split(|c: char| c == ',' || c.is_ascii_whitespace())
-                .filter(|f| !f.is_empty())
-                .map(|f| match f.parse::<Real>() {
-                    Ok(v) if v.is_finite() => Ok(v),
-                    _ => Err(bad(format!("expected a number, found \"{f}\""))),
-                })
-                .collect::<Result<_, _>>()?;
-            if v.len() != 4 {
-                return Err(bad(format!("expected 4 numbers x1,y1,x2,y2, found {}", v.len())));
-            }
-            walls.push(Segment { a: (v[0], v[1]), b: (v[2], v[3]) });
-        }
+    pub fn parse(path: &str, text: &str) -> Result<LineMap, TextFileError> {
+        let walls: Vec<Segment> = textfile::numeric_lines(path, text, 4, "x1,y1,x2,y2", true)?
+            .into_iter()
+            .map(|(_, v)| Segment { a: (v[0], v[1]), b: (v[2], v[3]) })
+            .collect();
         if walls.is_empty() {
-            return Err(WorldError::Empty(path.to_string()));
+            return Err(TextFileError::Bad {
+                path: path.to_string(),
+                line: 0,
+                message: "the map has no wall segments".into(),
+            });
         }
-        Ok(World { walls })
+        Ok(LineMap { walls })
     }
 
     /// Reads a line-map file.
-    pub fn load_linemap(path: &Path) -> Result<World, WorldError> {
-        let name = path.display().to_string();
-        let text =
-            std::fs::read_to_string(path).map_err(|source| WorldError::Io { path: name.clone(), source })?;
-        Self::parse_linemap(&name, &text)
+    pub fn load(path: &Path) -> Result<LineMap, TextFileError> {
+        let (name, text) = textfile::read(path)?;
+        Self::parse(&name, &text)
     }
 
     /// Distance (m) along the ray from `origin` in direction `angle` to the
@@ -132,8 +94,8 @@ impl World {
 mod tests {
     use super::*;
 
-    fn square() -> World {
-        World::parse_linemap("sq", "0,0,4,0\n4,0 4,4\n4 4 0 4\n0,4,0,0\n1,1,1,1\n").unwrap()
+    fn square() -> LineMap {
+        LineMap::parse("sq", "0,0,4,0\n4,0 4,4\n4 4 0 4\n0,4,0,0\n1,1,1,1\n").unwrap()
     }
 
     #[test]
@@ -153,10 +115,10 @@ mod tests {
 
     #[test]
     fn malformed_lines_name_file_and_line() {
-        let e = World::parse_linemap("m.txt", "0,0,1,1\n0,0,1\n").unwrap_err();
-        assert_eq!(e.to_string(), "m.txt:2: expected 4 numbers x1,y1,x2,y2, found 3");
-        let e = World::parse_linemap("m.txt", "0,0,x,1\n").unwrap_err();
+        let e = LineMap::parse("m.txt", "0,0,1,1\n0,0,1\n").unwrap_err();
+        assert_eq!(e.to_string(), "m.txt:2: expected 4 fields (x1,y1,x2,y2), found 3");
+        let e = LineMap::parse("m.txt", "0,0,x,1\n").unwrap_err();
         assert_eq!(e.to_string(), "m.txt:1: expected a number, found \"x\"");
-        assert!(matches!(World::parse_linemap("m.txt", "# nothing\n"), Err(WorldError::Empty(_))));
+        assert!(LineMap::parse("m.txt", "# nothing\n").unwrap_err().to_string().contains("no wall segments"));
     }
 }
