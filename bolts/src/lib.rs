@@ -10,4 +10,5 @@ pub mod linemap;
 pub mod map;
 pub mod sensor;
 pub mod sinks;
+pub mod slam;
 pub mod textfile;
