@@ -4,3 +4,6 @@
 
 pub mod grid;
 pub mod integrate;
+pub mod matcher;
+pub mod motion;
+pub mod options;

@@ -1,0 +1,70 @@
+//! The odometry motion model (GMapping's `drawFromMotion`): the odometry
+//! step from `old` to `new`, expressed in `old`'s frame, perturbed with
+//! Gaussian noise that grows with the translation and the rotation, then
+//! applied to a particle's pose.
+
+use rand::Rng;
+
+use crate::geometry::{Pose2, normalize_angle};
+use crate::slam::options::SlamOptions;
+
+/// A standard normal sample (Box–Muller).
+pub fn standard_normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+    use rand::RngExt;
+    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+/// `pose` moved by the odometry step `old → new`, with noise.
+pub fn sample_motion<R: Rng + ?Sized>(
+    pose: &Pose2,
+    old: &Pose2,
+    new: &Pose2,
+    o: &SlamOptions,
+    rng: &mut R,
+) -> Pose2 {
+    let d = new.relative_to(old);
+    let sxy = 0.3 * o.srr;
+    let x = d.x + standard_normal(rng) * (o.srr * d.x.abs() + o.str * d.theta.abs() + sxy * d.y.abs());
+    let y = d.y + standard_normal(rng) * (o.srr * d.y.abs() + o.str * d.theta.abs() + sxy * d.x.abs());
+    let theta = d.theta + standard_normal(rng) * (o.stt * d.theta.abs() + o.srt * d.x.hypot(d.y));
+    pose.compose(&Pose2::new(x, y, normalize_angle(theta)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn samples_have_the_model_mean_and_spread() {
+        let o = SlamOptions::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let (old, new) =
+            (Pose2::new(2.0, 1.0, 0.5), Pose2::new(2.0, 1.0, 0.5).compose(&Pose2::new(1.0, 0.0, 0.2)));
+        let start = Pose2::new(-3.0, 4.0, 1.0);
+        let n = 20_000;
+        let samples: Vec<Pose2> = (0..n).map(|_| sample_motion(&start, &old, &new, &o, &mut rng)).collect();
+        let local: Vec<Pose2> = samples.iter().map(|s| s.relative_to(&start)).collect();
+        let mean = |f: fn(&Pose2) -> f64| local.iter().map(f).sum::<f64>() / n as f64;
+        let sd = |f: fn(&Pose2) -> f64, m: f64| {
+            (local.iter().map(|p| (f(p) - m).powi(2)).sum::<f64>() / n as f64).sqrt()
+        };
+        let (mx, my, mt) = (mean(|p| p.x), mean(|p| p.y), mean(|p| p.theta));
+        assert!((mx - 1.0).abs() < 0.01 && my.abs() < 0.01 && (mt - 0.2).abs() < 0.01, "{mx} {my} {mt}");
+        // σx = srr·1 + str·0.2 = 0.12; σy = str·0.2 + 0.3·srr·1 = 0.05; σθ = stt·0.2 + srt·1 = 0.24.
+        // (x and y mix slightly with θ after composing; loose bounds.)
+        assert!((sd(|p| p.x, mx) - 0.12).abs() < 0.01, "{}", sd(|p| p.x, mx));
+        assert!((sd(|p| p.theta, mt) - 0.24).abs() < 0.01, "{}", sd(|p| p.theta, mt));
+    }
+
+    #[test]
+    fn no_motion_no_noise() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let p = Pose2::new(1.0, 2.0, 3.0);
+        let o = Pose2::new(5.0, 5.0, 0.1);
+        let moved = sample_motion(&p, &o, &o, &SlamOptions::default(), &mut rng);
+        assert!(moved.distance(&p) < 1e-12 && (moved.theta - p.theta).abs() < 1e-12, "{moved:?}");
+    }
+}

@@ -1,0 +1,140 @@
+//! Every SLAM setting in one place, with GMapping's ROS defaults, checked
+//! when built.
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::Real;
+
+/// A limit on pose evaluations per particle per reading (seed 003's
+/// scan-matching cutoff).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Cutoff {
+    /// Hill climbing runs until it converges.
+    Unbounded,
+    /// At most this many pose evaluations.
+    Evaluations(u32),
+}
+
+/// SLAM settings; `Default` gives GMapping's ROS defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SlamOptions {
+    /// Particles. The default is 30.
+    pub particles: usize,
+    /// Map cell size, metres. The default is 0.05.
+    pub delta: Real,
+    /// Beams longer than this are cut for mapping and ignored for matching,
+    /// metres. The default is 80 (effectively the laser's range).
+    pub max_urange: Real,
+    /// Matching kernel σ (the score's Gaussian), metres. The default is 0.05.
+    pub sigma: Real,
+    /// Cells searched around each end point. The default is 1.
+    pub kernel: i64,
+    /// First linear step of the hill climber, metres. The default is 0.05.
+    pub lstep: Real,
+    /// First angular step, radians. The default is 0.05.
+    pub astep: Real,
+    /// Step halvings. The default is 5.
+    pub iterations: u32,
+    /// Likelihood σ, metres. The default is 0.075.
+    pub lsigma: Real,
+    /// Smoothing of the weights (log-likelihoods are divided by
+    /// `ogain` × particles before exponentiating). The default is 3.
+    pub ogain: Real,
+    /// Use every (lskip+1)-th beam. The default is 0.
+    pub lskip: usize,
+    /// Translation noise per metre of translation. The default is 0.1.
+    pub srr: Real,
+    /// Rotation noise per metre of translation. The default is 0.2.
+    pub srt: Real,
+    /// Translation noise per radian of rotation. The default is 0.1.
+    pub str: Real,
+    /// Rotation noise per radian of rotation. The default is 0.2.
+    pub stt: Real,
+    /// Process a scan after this much travel, metres. The default is 1.0.
+    pub linear_update: Real,
+    /// ...or this much turning, radians. The default is 0.5.
+    pub angular_update: Real,
+    /// Resample when Neff falls below this fraction of the particles. The
+    /// default is 0.5.
+    pub resample_threshold: Real,
+    /// Occupancy above which a cell counts as a wall for matching. The
+    /// default is 0.1.
+    pub occupied_threshold: Real,
+    /// Pose evaluations allowed per particle per reading. The default is
+    /// unbounded.
+    pub cutoff: Cutoff,
+}
+
+impl Default for SlamOptions {
+    fn default() -> Self {
+        SlamOptions {
+            particles: 30,
+            delta: 0.05,
+            max_urange: 80.0,
+            sigma: 0.05,
+            kernel: 1,
+            lstep: 0.05,
+            astep: 0.05,
+            iterations: 5,
+            lsigma: 0.075,
+            ogain: 3.0,
+            lskip: 0,
+            srr: 0.1,
+            srt: 0.2,
+            str: 0.1,
+            stt: 0.2,
+            linear_update: 1.0,
+            angular_update: 0.5,
+            resample_threshold: 0.5,
+            occupied_threshold: 0.1,
+            cutoff: Cutoff::Unbounded,
+        }
+    }
+}
+
+impl SlamOptions {
+    /// Checks every range; says which setting is wrong.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = |name: &str, v: Real| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be > 0, got {v}")) }
+        };
+        let non_negative = |name: &str, v: Real| {
+            if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(format!("{name} must be ≥ 0, got {v}")) }
+        };
+        if self.particles == 0 {
+            return Err("particles must be at least 1".into());
+        }
+        for (n, v) in [
+            ("delta", self.delta),
+            ("max_urange", self.max_urange),
+            ("sigma", self.sigma),
+            ("lstep", self.lstep),
+            ("astep", self.astep),
+            ("lsigma", self.lsigma),
+            ("ogain", self.ogain),
+        ] {
+            positive(n, v)?;
+        }
+        for (n, v) in [
+            ("srr", self.srr),
+            ("srt", self.srt),
+            ("str", self.str),
+            ("stt", self.stt),
+            ("linear_update", self.linear_update),
+            ("angular_update", self.angular_update),
+        ] {
+            non_negative(n, v)?;
+        }
+        if !(0.0..=1.0).contains(&self.resample_threshold) || !(0.0..1.0).contains(&self.occupied_threshold) {
+            return Err("resample_threshold must be in [0, 1] and occupied_threshold in [0, 1)".into());
+        }
+        if !(0..=5).contains(&self.kernel) {
+            return Err(format!("kernel must be 0..=5 cells, got {}", self.kernel));
+        }
+        if self.cutoff == Cutoff::Evaluations(0) {
+            return Err("cutoff must allow at least 1 evaluation".into());
+        }
+        Ok(())
+    }
+}
