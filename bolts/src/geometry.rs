@@ -64,6 +64,30 @@ impl Pose2 {
     }
 }
 
+/// Calls `visit` for each cell on the line from `a` to `b`, both included
+/// (Bresenham), in order from `a`.
+#[inline]
+pub fn line_cells(a: (i64, i64), b: (i64, i64), mut visit: impl FnMut((i64, i64))) {
+    let (dx, dy) = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
+    let (sx, sy) = (if a.0 < b.0 { 1 } else { -1 }, if a.1 < b.1 { 1 } else { -1 });
+    let (mut x, mut y, mut err) = (a.0, a.1, dx + dy);
+    loop {
+        visit((x, y));
+        if x == b.0 && y == b.1 {
+            return;
+        }
+        let e2 = 2 * err;
+        if e2 >= dy {
+            err += dy;
+            x += sx;
+        }
+        if e2 <= dx {
+            err += dx;
+            y += sy;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,5 +121,30 @@ mod tests {
         let b = Pose2::new(-0.5, 4.0, -2.9);
         assert!(close(&a.inverse().compose(&a), &Pose2::IDENTITY));
         assert!(close(&a.compose(&b.relative_to(&a)), &b));
+    }
+
+    #[test]
+    fn lines_include_both_ends_and_stay_on_the_line() {
+        for (a, b) in
+            [((0, 0), (4, 2)), ((4, 2), (0, 0)), ((-3, 5), (7, -1)), ((2, 2), (2, -6)), ((3, 3), (3, 3))]
+        {
+            let mut cells: Vec<(i64, i64)> = Vec::new();
+            line_cells(a, b, |c| cells.push(c));
+            assert_eq!((cells[0], cells[cells.len() - 1]), (a, b));
+            let (dx, dy) = ((b.0 - a.0) as f64, (b.1 - a.1) as f64);
+            assert_eq!(cells.len() as f64, dx.abs().max(dy.abs()) + 1.0, "{a:?}→{b:?}");
+            let length = dx.hypot(dy).max(1e-9);
+            for w in cells.windows(2) {
+                assert!(
+                    (w[1].0 - w[0].0).abs() <= 1 && (w[1].1 - w[0].1).abs() <= 1,
+                    "steps are to neighbours"
+                );
+            }
+            for c in &cells {
+                // Distance of the cell from the ideal line, in cells.
+                let d = ((c.0 - a.0) as f64 * dy - (c.1 - a.1) as f64 * dx).abs() / length;
+                assert!(d <= 0.5 + 1e-9 || length < 1e-6, "{c:?} is {d} off {a:?}→{b:?}");
+            }
+        }
     }
 }

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use squall_topology::fsio::write_atomic;
 
-use crate::geometry::Pose2;
+use crate::geometry::{Pose2, line_cells};
 use crate::map::{OccupancyGrid, UNKNOWN};
 
 /// Occupancy (percent) at or above which a cell is drawn occupied.
@@ -96,26 +96,8 @@ fn draw_path(grid: &OccupancyGrid, trajectory: &[Pose2], rgb: &mut [u8]) {
     };
     let pixels: Vec<Option<(i64, i64)>> = trajectory.iter().map(|p| image_pixel(grid, p)).collect();
     for w in pixels.windows(2) {
-        if let (Some((x0, y0)), Some((x1, y1))) = (w[0], w[1]) {
-            // Bresenham.
-            let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
-            let (sx, sy) = (if x0 < x1 { 1 } else { -1 }, if y0 < y1 { 1 } else { -1 });
-            let (mut x, mut y, mut err) = (x0, y0, dx + dy);
-            loop {
-                put(x, y);
-                if x == x1 && y == y1 {
-                    break;
-                }
-                let e2 = 2 * err;
-                if e2 >= dy {
-                    err += dy;
-                    x += sx;
-                }
-                if e2 <= dx {
-                    err += dx;
-                    y += sy;
-                }
-            }
+        if let (Some(a), Some(b)) = (w[0], w[1]) {
+            line_cells(a, b, |(x, y)| put(x, y));
         }
     }
     if let Some(Some((x, y))) = pixels.first() {
