@@ -21,6 +21,14 @@ const TILE_MASK: i64 = TILE_SIDE as i64 - 1;
 /// Extra tiles added on a side when the index grows.
 const GROWTH_SLACK: i64 = 2;
 
+/// ⌊v⌋ as an integer, without a libm call (the build targets baseline
+/// x86-64, where `f64::floor` is a function call). Exact for |v| < 2⁶³.
+#[inline]
+fn floor(v: Real) -> i64 {
+    let t = v as i64;
+    if (t as Real) > v { t - 1 } else { t }
+}
+
 /// What one cell has seen.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Cell {
@@ -101,11 +109,35 @@ impl TiledGrid {
     }
 
     /// The cell containing world point (`x`, `y`).
+    #[inline]
     pub fn cell_of(&self, x: Real, y: Real) -> (i64, i64) {
-        (
-            ((x - self.origin.0) / self.resolution).floor() as i64,
-            ((y - self.origin.1) / self.resolution).floor() as i64,
-        )
+        (floor((x - self.origin.0) / self.resolution), floor((y - self.origin.1) / self.resolution))
+    }
+
+    /// Calls `visit(cell, value)` for the cells within `k` of `centre`,
+    /// column by column (x outer, y inner). Reads the tile once when the
+    /// square lies inside one.
+    #[inline]
+    pub fn for_each_in_square(&self, centre: (i64, i64), k: i64, mut visit: impl FnMut((i64, i64), Cell)) {
+        let (lo, hi) = ((centre.0 - k, centre.1 - k), (centre.0 + k, centre.1 + k));
+        let tile = (lo.0 >> TILE_SHIFT, lo.1 >> TILE_SHIFT);
+        if (hi.0 >> TILE_SHIFT, hi.1 >> TILE_SHIFT) != tile {
+            for x in lo.0..=hi.0 {
+                for y in lo.1..=hi.1 {
+                    visit((x, y), self.get((x, y)));
+                }
+            }
+            return;
+        }
+        let t = self.slot(tile).and_then(|s| self.tiles[s].as_deref());
+        for x in lo.0..=hi.0 {
+            for y in lo.1..=hi.1 {
+                let cell = t.map_or(Cell::default(), |t| {
+                    t.cells[((y & TILE_MASK) as usize) * TILE_SIDE + (x & TILE_MASK) as usize]
+                });
+                visit((x, y), cell);
+            }
+        }
     }
 
     /// World coordinates of the centre of cell `c`.
@@ -302,6 +334,30 @@ mod tests {
         let (x, y) = o.cell_of(10.0 - 0.25, 20.25).unwrap();
         assert_eq!(o.get(x, y), 0, "visited, never hit: free");
         assert_eq!(o.get(0, 0), crate::map::UNKNOWN);
+    }
+
+    #[test]
+    fn integer_floor_matches_floor() {
+        for v in [-2.5, -2.0, -1e-12, 0.0, 1e-12, 0.999_999, 1.0, 3.7, -1e9 - 0.5, 1e12 + 0.25] {
+            assert_eq!(floor(v), v.floor() as i64, "{v}");
+        }
+    }
+
+    #[test]
+    fn square_reads_match_single_reads() {
+        let mut g = TiledGrid::new(0.1, (0.0, 0.0));
+        for (i, c) in [(0, 0), (31, 31), (32, 32), (-1, 5), (15, -33)].into_iter().enumerate() {
+            g.get_mut(c).hits = i as u32 + 1;
+        }
+        // Centres inside a tile, on tile corners and edges, and in empty space.
+        for centre in [(5, 5), (31, 31), (32, 0), (0, -1), (-33, 15), (500, 500)] {
+            for k in [0, 1, 2] {
+                let mut seen = Vec::new();
+                g.for_each_in_square(centre, k, |c, cell| seen.push((c, cell)));
+                assert_eq!(seen.len() as i64, (2 * k + 1) * (2 * k + 1));
+                assert!(seen.iter().all(|(c, cell)| *cell == g.get(*c)), "{centre:?} k {k}");
+            }
+        }
     }
 
     #[test]

@@ -67,57 +67,91 @@ fn fullness(c: &Cell) -> Real {
     c.occupancy().unwrap_or(-1.0)
 }
 
-/// For each matched beam, the squared distance from its end point to the
-/// best mean hit; calls `each(Some(d²))` or `each(None)` per beam.
+/// A beam's world direction for one laser heading: (cos, sin) and the
+/// cell step from its end point back towards the laser.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Direction {
+    cos: Real,
+    sin: Real,
+    back: (i64, i64),
+}
+
+/// The directions of every beam with the laser at heading `theta`. Moves
+/// that only translate keep the heading, so the hill climber computes these
+/// once per heading rather than once per pose.
+fn directions(scan: &PreparedScan, theta: Real, out: &mut Vec<Direction>) {
+    out.clear();
+    out.extend(scan.beams.iter().map(|b| {
+        let (sin, cos) = (theta + b.angle).sin_cos();
+        let back = (
+            (-cos * std::f64::consts::SQRT_2).round() as i64,
+            (-sin * std::f64::consts::SQRT_2).round() as i64,
+        );
+        Direction { cos, sin, back }
+    }));
+}
+
+/// For each beam, the squared distance from its end point to the best mean
+/// hit; calls `each(Some(d²))` or `each(None)` per beam. `dirs` must be the
+/// directions for `pose`'s laser heading.
 #[inline]
 fn match_beams(
     grid: &TiledGrid,
     pose: &Pose2,
     scan: &PreparedScan,
+    dirs: &[Direction],
     o: &SlamOptions,
     mut each: impl FnMut(Option<Real>),
 ) {
     let laser = pose.compose(&scan.laser_offset);
     let k = o.kernel;
-    for b in &scan.beams {
-        let a = laser.theta + b.angle;
-        let (s, c) = a.sin_cos();
-        let hit = (laser.x + b.range * c, laser.y + b.range * s);
-        let back =
-            ((-c * std::f64::consts::SQRT_2).round() as i64, (-s * std::f64::consts::SQRT_2).round() as i64);
+    for (b, d) in scan.beams.iter().zip(dirs) {
+        let hit = (laser.x + b.range * d.cos, laser.y + b.range * d.sin);
         let centre = grid.cell_of(hit.0, hit.1);
         let mut best: Option<Real> = None;
-        for dx in -k..=k {
-            for dy in -k..=k {
-                let pr = (centre.0 + dx, centre.1 + dy);
-                let cell = grid.get(pr);
-                if fullness(&cell) <= o.occupied_threshold {
-                    continue;
-                }
-                let free = grid.get((pr.0 + back.0, pr.1 + back.1));
-                if fullness(&free) >= o.occupied_threshold {
-                    continue;
-                }
-                let (mx, my) = cell.mean().expect("an occupied cell has hits");
-                let d2 = (hit.0 - mx).powi(2) + (hit.1 - my).powi(2);
-                if best.is_none_or(|b| d2 < b) {
-                    best = Some(d2);
-                }
+        grid.for_each_in_square(centre, k, |pr, cell| {
+            if fullness(&cell) <= o.occupied_threshold {
+                return;
             }
-        }
+            let free = grid.get((pr.0 + d.back.0, pr.1 + d.back.1));
+            if fullness(&free) >= o.occupied_threshold {
+                return;
+            }
+            let (mx, my) = cell.mean().expect("an occupied cell has hits");
+            let d2 = (hit.0 - mx).powi(2) + (hit.1 - my).powi(2);
+            if best.is_none_or(|b| d2 < b) {
+                best = Some(d2);
+            }
+        });
         each(best);
     }
 }
 
-/// The matching score of `pose` (higher is better).
-pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
+fn laser_heading(pose: &Pose2, scan: &PreparedScan) -> Real {
+    pose.compose(&scan.laser_offset).theta
+}
+
+fn score_with(
+    grid: &TiledGrid,
+    pose: &Pose2,
+    scan: &PreparedScan,
+    dirs: &[Direction],
+    o: &SlamOptions,
+) -> Real {
     let mut s = 0.0;
-    match_beams(grid, pose, scan, o, |d2| {
+    match_beams(grid, pose, scan, dirs, o, |d2| {
         if let Some(d2) = d2 {
             s += (-d2 / o.sigma).exp();
         }
     });
     s
+}
+
+/// The matching score of `pose` (higher is better).
+pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
+    let mut dirs = Vec::with_capacity(scan.beams.len());
+    directions(scan, laser_heading(pose, scan), &mut dirs);
+    score_with(grid, pose, scan, &dirs, o)
 }
 
 /// (score, log-likelihood, beams matched) of `pose`.
@@ -127,9 +161,11 @@ pub fn likelihood_and_score(
     scan: &PreparedScan,
     o: &SlamOptions,
 ) -> (Real, Real, usize) {
+    let mut dirs = Vec::with_capacity(scan.beams.len());
+    directions(scan, laser_heading(pose, scan), &mut dirs);
     let (mut s, mut l, mut n) = (0.0, 0.0, 0);
     let no_hit = NULL_LIKELIHOOD / o.lsigma;
-    match_beams(grid, pose, scan, o, |d2| match d2 {
+    match_beams(grid, pose, scan, &dirs, o, |d2| match d2 {
         Some(d2) => {
             s += (-d2 / o.sigma).exp();
             l += -d2 / o.lsigma;
@@ -158,7 +194,11 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
         Cutoff::Evaluations(n) => n,
     };
     let mut current = *init;
-    let mut current_score = score(grid, &current, scan, o);
+    let mut current_dirs = Vec::with_capacity(scan.beams.len());
+    let mut turned_dirs = Vec::with_capacity(scan.beams.len());
+    let mut best_turned_dirs = Vec::with_capacity(scan.beams.len());
+    directions(scan, laser_heading(&current, scan), &mut current_dirs);
+    let mut current_score = score_with(grid, &current, scan, &current_dirs, o);
     let mut evaluations = 1;
     let (mut ld, mut ad) = (o.lstep, o.astep);
     let mut refinement = 0;
@@ -171,6 +211,7 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
         }
         best_score = current_score;
         let mut best_local = current;
+        let mut best_is_turn = false;
         for (dx, dy, dt) in [
             (ld, 0.0, 0.0),
             (-ld, 0.0, 0.0),
@@ -183,12 +224,24 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
                 break;
             }
             let candidate = Pose2::new(current.x + dx, current.y + dy, current.theta + dt);
-            let s = score(grid, &candidate, scan, o);
+            let s = if dt == 0.0 {
+                score_with(grid, &candidate, scan, &current_dirs, o)
+            } else {
+                directions(scan, laser_heading(&candidate, scan), &mut turned_dirs);
+                score_with(grid, &candidate, scan, &turned_dirs, o)
+            };
             evaluations += 1;
             if s > current_score {
                 current_score = s;
                 best_local = candidate;
+                best_is_turn = dt != 0.0;
+                if best_is_turn {
+                    std::mem::swap(&mut best_turned_dirs, &mut turned_dirs);
+                }
             }
+        }
+        if best_is_turn {
+            std::mem::swap(&mut current_dirs, &mut best_turned_dirs);
         }
         current = best_local;
         let improving = current_score > best_score;
