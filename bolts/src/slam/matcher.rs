@@ -60,11 +60,18 @@ impl PreparedScan {
     }
 }
 
-/// Occupancy as GMapping reads it: unknown cells count as −1 (so they are
-/// "free" for the free-cell test and never a wall).
+/// Whether `c` is a wall for matching: visited, with hits/visits above the
+/// threshold (compared without dividing).
 #[inline]
-fn fullness(c: &Cell) -> Real {
-    c.occupancy().unwrap_or(-1.0)
+fn is_wall(c: &Cell, threshold: Real) -> bool {
+    c.visits > 0 && Real::from(c.hits) > threshold * Real::from(c.visits)
+}
+
+/// Whether `c` is free for matching: hits/visits below the threshold, or
+/// never visited (GMapping reads unknown cells as occupancy −1).
+#[inline]
+fn is_free(c: &Cell, threshold: Real) -> bool {
+    c.visits == 0 || Real::from(c.hits) < threshold * Real::from(c.visits)
 }
 
 /// A beam's world direction for one laser heading: (cos, sin) and the
@@ -110,11 +117,11 @@ fn match_beams(
         let centre = grid.cell_of(hit.0, hit.1);
         let mut best: Option<Real> = None;
         grid.for_each_in_square(centre, k, |pr, cell| {
-            if fullness(&cell) <= o.occupied_threshold {
+            if !is_wall(&cell, o.occupied_threshold) {
                 return;
             }
             let free = grid.get((pr.0 + d.back.0, pr.1 + d.back.1));
-            if fullness(&free) >= o.occupied_threshold {
+            if !is_free(&free, o.occupied_threshold) {
                 return;
             }
             let (mx, my) = cell.mean().expect("an occupied cell has hits");
