@@ -172,7 +172,7 @@ impl Rbpf {
     /// map of that scan (one map, shared tile by tile).
     fn start(&mut self, scan: &LaserReading) -> StepReport {
         let o = &self.options;
-        let mut map = TiledGrid::new(o.delta, (0.0, 0.0));
+        let mut map = TiledGrid::new(o.delta, (0.0, 0.0)).with_wall_threshold(o.occupied_threshold);
         integrate_scan(&mut map, &scan.odometry, scan, o.max_urange);
         let node =
             Arc::new(Node { stamp: scan.stamp, pose: scan.odometry, odometry: scan.odometry, parent: None });

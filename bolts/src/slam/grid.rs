@@ -57,20 +57,35 @@ impl Cell {
     }
 }
 
-/// A square block of cells.
+/// A square block of cells, with one bit per cell saying whether it is a
+/// wall (so the scan matcher can skip the many cells that are not without
+/// reading them).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tile {
     cells: Box<[Cell; TILE_SIDE * TILE_SIDE]>,
+    /// Bit x of `walls[y]`: cell (x, y) of the tile is a wall.
+    walls: [u32; TILE_SIDE],
 }
 
 impl Default for Tile {
     fn default() -> Self {
-        Tile { cells: Box::new([Cell::default(); TILE_SIDE * TILE_SIDE]) }
+        Tile { cells: Box::new([Cell::default(); TILE_SIDE * TILE_SIDE]), walls: [0; TILE_SIDE] }
     }
 }
 
 /// Bytes one tile occupies.
-pub const TILE_BYTES: usize = std::mem::size_of::<Cell>() * TILE_SIDE * TILE_SIDE;
+pub const TILE_BYTES: usize = std::mem::size_of::<Cell>() * TILE_SIDE * TILE_SIDE + 4 * TILE_SIDE;
+
+/// Occupancy above which a cell is a wall, unless set otherwise.
+pub const DEFAULT_WALL_THRESHOLD: Real = 0.1;
+
+impl Cell {
+    /// Whether hits/visits exceeds `threshold` (compared without dividing).
+    #[inline]
+    pub fn is_wall(&self, threshold: Real) -> bool {
+        self.visits > 0 && Real::from(self.hits) > threshold * Real::from(self.visits)
+    }
+}
 
 /// An occupancy grid that grows on demand; cell (0, 0) is at world
 /// (`origin`), cells are `resolution` metres.
@@ -84,13 +99,16 @@ pub struct TiledGrid {
     tiles_wide: usize,
     tiles_high: usize,
     tiles: Vec<Option<Arc<Tile>>>,
+    /// Occupancy above which a cell counts as a wall.
+    wall_threshold: Real,
     /// Tiles cloned because they were shared (copy-on-write), since the
     /// counter was last taken.
     clones: u64,
 }
 
 impl TiledGrid {
-    /// An empty grid.
+    /// An empty grid whose walls are cells with occupancy above
+    /// [`DEFAULT_WALL_THRESHOLD`].
     pub fn new(resolution: Real, origin: (Real, Real)) -> Self {
         TiledGrid {
             resolution,
@@ -99,8 +117,24 @@ impl TiledGrid {
             tiles_wide: 0,
             tiles_high: 0,
             tiles: Vec::new(),
+            wall_threshold: DEFAULT_WALL_THRESHOLD,
             clones: 0,
         }
+    }
+
+    /// The same, with walls above `threshold` (set before any update).
+    ///
+    /// # Panics
+    /// If the grid already holds cells.
+    pub fn with_wall_threshold(mut self, threshold: Real) -> Self {
+        assert!(self.tiles.is_empty(), "the wall threshold is set before the grid holds cells");
+        self.wall_threshold = threshold;
+        self
+    }
+
+    /// Occupancy above which a cell is a wall.
+    pub fn wall_threshold(&self) -> Real {
+        self.wall_threshold
     }
 
     /// Metres per cell.
@@ -112,40 +146,6 @@ impl TiledGrid {
     #[inline]
     pub fn cell_of(&self, x: Real, y: Real) -> (i64, i64) {
         (floor((x - self.origin.0) / self.resolution), floor((y - self.origin.1) / self.resolution))
-    }
-
-    /// Calls `visit(cell, value)` for the cells within `k` of `centre`,
-    /// column by column (x outer, y inner). Reads the tile once when the
-    /// square lies inside one.
-    #[inline]
-    pub fn for_each_in_square(&self, centre: (i64, i64), k: i64, mut visit: impl FnMut((i64, i64), Cell)) {
-        let (lo, hi) = ((centre.0 - k, centre.1 - k), (centre.0 + k, centre.1 + k));
-        let tile = (lo.0 >> TILE_SHIFT, lo.1 >> TILE_SHIFT);
-        if (hi.0 >> TILE_SHIFT, hi.1 >> TILE_SHIFT) != tile {
-            for x in lo.0..=hi.0 {
-                for y in lo.1..=hi.1 {
-                    visit((x, y), self.get((x, y)));
-                }
-            }
-            return;
-        }
-        let t = self.slot(tile).and_then(|s| self.tiles[s].as_deref());
-        for x in lo.0..=hi.0 {
-            for y in lo.1..=hi.1 {
-                let cell = t.map_or(Cell::default(), |t| {
-                    t.cells[((y & TILE_MASK) as usize) * TILE_SIDE + (x & TILE_MASK) as usize]
-                });
-                visit((x, y), cell);
-            }
-        }
-    }
-
-    /// World coordinates of the centre of cell `c`.
-    pub fn centre(&self, c: (i64, i64)) -> (Real, Real) {
-        (
-            self.origin.0 + (c.0 as Real + 0.5) * self.resolution,
-            self.origin.1 + (c.1 as Real + 0.5) * self.resolution,
-        )
     }
 
     fn slot(&self, tile: (i64, i64)) -> Option<usize> {
@@ -204,9 +204,10 @@ impl TiledGrid {
         self.reserve((lo.0 >> TILE_SHIFT, lo.1 >> TILE_SHIFT), (hi.0 >> TILE_SHIFT, hi.1 >> TILE_SHIFT));
     }
 
-    /// The cell `c` for writing: its tile is created, or cloned if shared.
+    /// Changes cell `c` with `f`: its tile is created, or cloned if another
+    /// map shares it; the wall bit follows the new value.
     #[inline]
-    pub fn get_mut(&mut self, c: (i64, i64)) -> &mut Cell {
+    pub fn update(&mut self, c: (i64, i64), f: impl FnOnce(&mut Cell)) {
         let tile = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
         let slot = match self.slot(tile) {
             Some(s) => s,
@@ -215,12 +216,55 @@ impl TiledGrid {
                 self.slot(tile).expect("reserved")
             }
         };
+        let threshold = self.wall_threshold;
         let entry = self.tiles[slot].get_or_insert_with(|| Arc::new(Tile::default()));
         if Arc::strong_count(entry) > 1 {
             self.clones += 1;
         }
         let tile = Arc::make_mut(entry);
-        &mut tile.cells[((c.1 & TILE_MASK) as usize) * TILE_SIDE + (c.0 & TILE_MASK) as usize]
+        let (x, y) = ((c.0 & TILE_MASK) as usize, (c.1 & TILE_MASK) as usize);
+        let cell = &mut tile.cells[y * TILE_SIDE + x];
+        f(cell);
+        if cell.is_wall(threshold) {
+            tile.walls[y] |= 1 << x;
+        } else {
+            tile.walls[y] &= !(1 << x);
+        }
+    }
+
+    /// Calls `visit(cell, value)` for the walls within `k` cells of
+    /// `centre`, column by column (x outer, y inner), reading only the wall
+    /// bits of the others.
+    #[inline]
+    pub fn for_each_wall_in_square(
+        &self,
+        centre: (i64, i64),
+        k: i64,
+        mut visit: impl FnMut((i64, i64), Cell),
+    ) {
+        let (lo, hi) = ((centre.0 - k, centre.1 - k), (centre.0 + k, centre.1 + k));
+        let tile = (lo.0 >> TILE_SHIFT, lo.1 >> TILE_SHIFT);
+        if (hi.0 >> TILE_SHIFT, hi.1 >> TILE_SHIFT) == tile {
+            let Some(t) = self.slot(tile).and_then(|s| self.tiles[s].as_deref()) else { return };
+            for x in lo.0..=hi.0 {
+                let bx = (x & TILE_MASK) as usize;
+                for y in lo.1..=hi.1 {
+                    let by = (y & TILE_MASK) as usize;
+                    if t.walls[by] >> bx & 1 == 1 {
+                        visit((x, y), t.cells[by * TILE_SIDE + bx]);
+                    }
+                }
+            }
+        } else {
+            for x in lo.0..=hi.0 {
+                for y in lo.1..=hi.1 {
+                    let cell = self.get((x, y));
+                    if cell.is_wall(self.wall_threshold) {
+                        visit((x, y), cell);
+                    }
+                }
+            }
+        }
     }
 
     /// Tiles cloned by copy-on-write since the last call.
@@ -292,7 +336,7 @@ mod tests {
     fn cells_anywhere_grow_the_grid() {
         let mut g = TiledGrid::new(0.05, (0.0, 0.0));
         for c in [(0, 0), (-1, -1), (100, -300), (-5000, 7000)] {
-            g.get_mut(c).hits += 3;
+            g.update(c, |cell| cell.hits += 3);
         }
         for c in [(0, 0), (-1, -1), (100, -300), (-5000, 7000)] {
             assert_eq!(g.get(c).hits, 3, "{c:?}");
@@ -307,14 +351,14 @@ mod tests {
     fn copies_share_tiles_until_written() {
         let mut a = TiledGrid::new(0.1, (0.0, 0.0));
         for x in 0..100 {
-            a.get_mut((x, 0)).visits += 1;
+            a.update((x, 0), |c| c.visits += 1);
         }
         assert_eq!(a.take_clone_count(), 0);
         let mut b = a.clone();
         assert_eq!(TiledGrid::distinct_tiles([&a, &b]).0, 4, "a copy shares every tile");
-        b.get_mut((5, 0)).hits += 1;
+        b.update((5, 0), |c| c.hits += 1);
         assert_eq!(b.take_clone_count(), 1, "one write clones one tile");
-        b.get_mut((6, 0)).hits += 1;
+        b.update((6, 0), |c| c.hits += 1);
         assert_eq!(b.take_clone_count(), 0, "the clone is now b's own");
         assert_eq!(TiledGrid::distinct_tiles([&a, &b]).0, 5);
         assert_eq!(a.get((5, 0)).hits, 0, "the original is untouched");
@@ -324,8 +368,8 @@ mod tests {
     #[test]
     fn exports_the_explored_area() {
         let mut g = TiledGrid::new(0.5, (10.0, 20.0));
-        *g.get_mut((1, 2)) = Cell { sum_x: 0.0, sum_y: 0.0, hits: 1, visits: 4 };
-        g.get_mut((-1, 0)).visits = 2;
+        g.update((1, 2), |c| *c = Cell { sum_x: 0.0, sum_y: 0.0, hits: 1, visits: 4 });
+        g.update((-1, 0), |c| c.visits = 2);
         let o = g.to_occupancy();
         assert_eq!((o.width, o.height), (64, 32), "two tiles side by side");
         assert_eq!(o.origin, (10.0 - 32.0 * 0.5, 20.0));
@@ -344,18 +388,32 @@ mod tests {
     }
 
     #[test]
-    fn square_reads_match_single_reads() {
+    fn wall_reads_match_single_reads() {
         let mut g = TiledGrid::new(0.1, (0.0, 0.0));
+        // Occupancies 1/2, 2/13, 3/22 (walls) and 4/4, 5/14 (walls), plus a free cell.
         for (i, c) in [(0, 0), (31, 31), (32, 32), (-1, 5), (15, -33)].into_iter().enumerate() {
-            g.get_mut(c).hits = i as u32 + 1;
+            g.update(c, |cell| {
+                *cell = Cell { hits: i as u32 + 1, visits: 2 + i as u32 % 3 * 9, ..Cell::default() }
+            });
         }
+        g.update((1, 1), |c| c.visits = 5);
+        // A wall that becomes free again loses its bit.
+        g.update((2, 2), |c| *c = Cell { hits: 1, visits: 1, ..Cell::default() });
+        g.update((2, 2), |c| c.visits = 100);
         // Centres inside a tile, on tile corners and edges, and in empty space.
-        for centre in [(5, 5), (31, 31), (32, 0), (0, -1), (-33, 15), (500, 500)] {
+        for centre in [(1, 1), (31, 31), (32, 0), (0, -1), (-33, 15), (500, 500), (2, 2)] {
             for k in [0, 1, 2] {
                 let mut seen = Vec::new();
-                g.for_each_in_square(centre, k, |c, cell| seen.push((c, cell)));
-                assert_eq!(seen.len() as i64, (2 * k + 1) * (2 * k + 1));
-                assert!(seen.iter().all(|(c, cell)| *cell == g.get(*c)), "{centre:?} k {k}");
+                g.for_each_wall_in_square(centre, k, |c, cell| seen.push((c, cell)));
+                let mut expected = Vec::new();
+                for x in centre.0 - k..=centre.0 + k {
+                    for y in centre.1 - k..=centre.1 + k {
+                        if g.get((x, y)).is_wall(0.1) {
+                            expected.push(((x, y), g.get((x, y))));
+                        }
+                    }
+                }
+                assert_eq!(seen, expected, "{centre:?} k {k}");
             }
         }
     }

@@ -25,15 +25,16 @@ pub fn integrate_scan(grid: &mut TiledGrid, robot: &Pose2, scan: &LaserReading, 
         let end_cell = grid.cell_of(end.0, end.1);
         line_cells(start, end_cell, |c| {
             if c != end_cell {
-                grid.get_mut(c).visits += 1;
+                grid.update(c, |cell| cell.visits += 1);
             }
         });
         if !cut {
-            let cell = grid.get_mut(end_cell);
-            cell.visits += 1;
-            cell.hits += 1;
-            cell.sum_x += end.0 as f32;
-            cell.sum_y += end.1 as f32;
+            grid.update(end_cell, |cell| {
+                cell.visits += 1;
+                cell.hits += 1;
+                cell.sum_x += end.0 as f32;
+                cell.sum_y += end.1 as f32;
+            });
         }
         used += 1;
     }

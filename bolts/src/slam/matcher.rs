@@ -2,8 +2,8 @@
 //! `likelihoodAndScore`, `optimize`).
 //!
 //! For each beam, the end point is compared with the mean hit point of the
-//! nearest occupied cell within `kernel` cells whose neighbour one step back
-//! along the beam is free; the score adds `exp(−d²/σ)` per matched beam and
+//! nearest wall cell (the grid's wall threshold) within `kernel` cells whose
+//! neighbour one step back along the beam is free; the score adds `exp(−d²/σ)` per matched beam and
 //! the log-likelihood `−d²/lσ` (or a fixed penalty when nothing matches).
 //! `optimize` climbs the score from an initial pose with moves of ±lstep in
 //! x and y and ±astep in θ, halving the steps when no move improves,
@@ -60,13 +60,6 @@ impl PreparedScan {
     }
 }
 
-/// Whether `c` is a wall for matching: visited, with hits/visits above the
-/// threshold (compared without dividing).
-#[inline]
-fn is_wall(c: &Cell, threshold: Real) -> bool {
-    c.visits > 0 && Real::from(c.hits) > threshold * Real::from(c.visits)
-}
-
 /// Whether `c` is free for matching: hits/visits below the threshold, or
 /// never visited (GMapping reads unknown cells as occupancy −1).
 #[inline]
@@ -112,16 +105,14 @@ fn match_beams(
 ) {
     let laser = pose.compose(&scan.laser_offset);
     let k = o.kernel;
+    let threshold = grid.wall_threshold();
     for (b, d) in scan.beams.iter().zip(dirs) {
         let hit = (laser.x + b.range * d.cos, laser.y + b.range * d.sin);
         let centre = grid.cell_of(hit.0, hit.1);
         let mut best: Option<Real> = None;
-        grid.for_each_in_square(centre, k, |pr, cell| {
-            if !is_wall(&cell, o.occupied_threshold) {
-                return;
-            }
+        grid.for_each_wall_in_square(centre, k, |pr, cell| {
             let free = grid.get((pr.0 + d.back.0, pr.1 + d.back.1));
-            if !is_free(&free, o.occupied_threshold) {
+            if !is_free(&free, threshold) {
                 return;
             }
             let (mx, my) = cell.mean().expect("an occupied cell has hits");
