@@ -45,6 +45,9 @@ pub struct Particle {
     pub pose: Pose2,
     /// Log-likelihood accumulated since the last resampling.
     pub log_weight: Real,
+    /// Log-likelihood accumulated over the particle's whole lineage (never
+    /// reset): what "best particle" means, as in GMapping's `weightSum`.
+    pub lineage_weight: Real,
     /// The map built along this particle's trajectory.
     pub map: TiledGrid,
     /// The last processed pose and its ancestry.
@@ -93,9 +96,9 @@ impl Rbpf {
         &self.particles
     }
 
-    /// The particle with the highest weight.
+    /// The particle whose lineage has the highest accumulated likelihood.
     pub fn best(&self) -> Option<&Particle> {
-        self.particles.iter().max_by(|a, b| a.log_weight.total_cmp(&b.log_weight))
+        self.particles.iter().max_by(|a, b| a.lineage_weight.total_cmp(&b.lineage_weight))
     }
 
     /// The best particle's pose at `odometry`: its last processed pose moved
@@ -146,6 +149,7 @@ impl Rbpf {
             }
             let (_, l, _) = likelihood_and_score(&p.map, &p.pose, &prepared, o);
             p.log_weight += l;
+            p.lineage_weight += l;
             report.evaluations.push(m.evaluations);
         }
         let logs: Vec<Real> = self.particles.iter().map(|p| p.log_weight).collect();
@@ -177,9 +181,57 @@ impl Rbpf {
         let node =
             Arc::new(Node { stamp: scan.stamp, pose: scan.odometry, odometry: scan.odometry, parent: None });
         self.particles = (0..o.particles)
-            .map(|_| Particle { pose: scan.odometry, log_weight: 0.0, map: map.clone(), node: node.clone() })
+            .map(|_| Particle {
+                pose: scan.odometry,
+                log_weight: 0.0,
+                lineage_weight: 0.0,
+                map: map.clone(),
+                node: node.clone(),
+            })
             .collect();
         self.last_odometry = Some(scan.odometry);
         StepReport { neff: o.particles as Real, ..StepReport::default() }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reading(odometry: Pose2) -> LaserReading {
+        LaserReading {
+            stamp: 0.0,
+            ranges: vec![2.0; 10],
+            angle_min: -1.0,
+            angle_increment: 0.2,
+            range_min: 0.0,
+            range_max: 30.0,
+            odometry,
+            laser_offset: Pose2::IDENTITY,
+        }
+    }
+
+    #[test]
+    fn the_best_particle_is_the_best_lineage_even_right_after_resampling() {
+        let mut f = Rbpf::new(SlamOptions { particles: 4, ..SlamOptions::default() }, 1).unwrap();
+        assert!(
+            f.process(&reading(Pose2::new(1.0, 2.0, 0.3))).is_some(),
+            "the first reading starts the filter"
+        );
+        assert_eq!(f.particles().len(), 4);
+        assert!(f.particles().iter().all(|p| p.pose == Pose2::new(1.0, 2.0, 0.3)));
+        // As after a resampling: all current weights 0, lineages differ.
+        for (i, p) in f.particles.iter_mut().enumerate() {
+            p.log_weight = 0.0;
+            p.lineage_weight = [-9.0, -2.0, -5.0, -7.0][i];
+            p.pose = Pose2::new(i as f64, 0.0, 0.0);
+        }
+        assert_eq!(f.best().unwrap().pose.x, 1.0);
+    }
+
+    #[test]
+    fn bad_options_are_refused() {
+        let e = Rbpf::new(SlamOptions { particles: 0, ..SlamOptions::default() }, 1).unwrap_err();
+        assert!(e.contains("particles"), "{e}");
     }
 }
