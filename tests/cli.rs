@@ -400,3 +400,53 @@ fn the_sim_spout_feeds_a_topology() {
     assert!(text(&out.stderr).contains("field of view must be in (0°, 360°]"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn slam_on_an_aces_prefix_writes_maps_and_a_good_trajectory() {
+    let dir = out_dir("slam-aces");
+    let log = shared_data("laser/aces.clf");
+    let out = squall(&["slam", "--log", &log, "--max-scans", "300", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    for f in ["map.pgm", "map.yaml", "map.png", "trajectory.tum", "metrics.json"] {
+        assert!(dir.join(f).exists(), "{f} missing");
+    }
+    let tum = dir.join("trajectory.tum");
+    let relations = shared_data("laser/aces.relations");
+    let out = squall(&["eval", "--trajectory", tum.to_str().unwrap(), "--relations", &relations, "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert!(v["matched"].as_u64().unwrap() > 10, "{v}");
+    // Raw odometry scores 0.549 m on the whole log; SLAM on the prefix must
+    // do far better.
+    assert!(v["trans_mean"].as_f64().unwrap() < 0.15, "{v}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let matcher = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "matcher").unwrap();
+    assert!(matcher["custom"]["evaluations_per_particle"]["count"].as_u64().unwrap() > 0, "{matcher}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn slam_on_the_simulator_and_its_argument_checks() {
+    let dir = out_dir("slam-sim");
+    let out = squall(&[
+        "slam",
+        "--max-scans",
+        "400",
+        "--particles",
+        "10",
+        "--cutoff",
+        "140",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let poses = std::fs::read_to_string(dir.join("trajectory.tum")).unwrap();
+    assert_eq!(poses.lines().filter(|l| !l.starts_with('#')).count(), 400);
+    let out = squall(&["slam", "--matchers", "2", "--out", dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--matchers 2: only 1 for now"), "{}", text(&out.stderr));
+    let out = squall(&["slam", "--cutoff", "fast", "--out", dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("cutoff"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

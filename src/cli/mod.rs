@@ -4,6 +4,7 @@ mod eval;
 mod progress;
 mod run;
 mod sim;
+mod slam;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -29,6 +30,7 @@ const EXIT_FAILED: u8 = 1;
         squall graph examples/topologies/wordcount.toml | dot -Tsvg > wc.svg\n  \
         squall eval --trajectory out/trajectory.tum --relations aces.relations\n  \
         squall sim --world office --duration 600 --seed 1 --out out/sim\n  \
+        squall slam --log ../shared/data/laser/aces.clf --out out/aces\n  \
         squall kinds\n\n\
         Exit codes: 0 success, 1 the run failed, 2 invalid topology or arguments."
 )]
@@ -79,6 +81,9 @@ enum Command {
     /// Score a trajectory: the relation metric and/or errors against ground
     /// truth.
     Eval(eval::EvalArgs),
+    /// RBPF SLAM on a log, a bag or the simulated office; writes map.pgm,
+    /// map.yaml, map.png, trajectory.tum and metrics.json.
+    Slam(slam::SlamArgs),
     /// Simulate a robot exploring a world; write a CARMEN log, ground truth
     /// and relations.
     Sim(sim::SimArgs),
@@ -123,6 +128,7 @@ pub(crate) fn main() -> ExitCode {
         },
         Command::Eval(args) => eval::eval(&args),
         Command::Sim(args) => sim::sim(&args),
+        Command::Slam(args) => slam::slam(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");
@@ -141,9 +147,14 @@ pub(crate) fn main() -> ExitCode {
 /// Parses and validates a topology; on failure prints every error and
 /// returns the exit code.
 fn load(args: &TopologyArgs) -> Result<Topology, ExitCode> {
+    report_invalid(TopologySpec::load(&args.file, &args.overrides))
+}
+
+/// Validates a parsed (or failed) spec against the built-in kinds; on
+/// failure prints every error and returns the exit code.
+fn report_invalid(spec: Result<TopologySpec, SpecErrors>) -> Result<Topology, ExitCode> {
     let registry = squall::builtin::registry();
-    let validated =
-        TopologySpec::load(&args.file, &args.overrides).and_then(|spec| Topology::validate(spec, &registry));
+    let validated = spec.and_then(|spec| Topology::validate(spec, &registry));
     validated.map_err(|errors: SpecErrors| {
         eprintln!("{errors}");
         eprintln!(

@@ -3,6 +3,7 @@
 //! resampling and the serial filter are here; the topology, the CLI and the
 //! accuracy and speed work follow.
 
+pub mod bolt;
 pub mod filter;
 pub mod grid;
 pub mod integrate;
@@ -10,3 +11,8 @@ pub mod matcher;
 pub mod motion;
 pub mod options;
 pub mod resample;
+
+/// Registers `slam.rbpf`.
+pub fn register(r: &mut squall_topology::Registry) {
+    r.register_bolt("slam.rbpf", bolt::SlamBolt::from_params);
+}

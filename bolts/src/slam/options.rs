@@ -6,13 +6,45 @@ use serde::{Deserialize, Serialize};
 use crate::geometry::Real;
 
 /// A limit on pose evaluations per particle per reading (seed 003's
-/// scan-matching cutoff).
+/// scan-matching cutoff). In files: `"none"` or a number.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "CutoffText", into = "CutoffText")]
 pub enum Cutoff {
     /// Hill climbing runs until it converges.
     Unbounded,
     /// At most this many pose evaluations.
     Evaluations(u32),
+}
+
+/// How a cutoff is written: `"none"` or a count.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(untagged)]
+enum CutoffText {
+    Count(u32),
+    Name(String),
+}
+
+impl TryFrom<CutoffText> for Cutoff {
+    type Error = String;
+
+    fn try_from(t: CutoffText) -> Result<Self, String> {
+        match t {
+            CutoffText::Count(n) => Ok(Cutoff::Evaluations(n)),
+            CutoffText::Name(s) if s == "none" => Ok(Cutoff::Unbounded),
+            CutoffText::Name(s) => {
+                Err(format!("cutoff must be \"none\" or a number of evaluations, got \"{s}\""))
+            }
+        }
+    }
+}
+
+impl From<Cutoff> for CutoffText {
+    fn from(c: Cutoff) -> Self {
+        match c {
+            Cutoff::Unbounded => CutoffText::Name("none".into()),
+            Cutoff::Evaluations(n) => CutoffText::Count(n),
+        }
+    }
 }
 
 /// SLAM settings; `Default` gives GMapping's ROS defaults.
@@ -136,5 +168,21 @@ impl SlamOptions {
             return Err("cutoff must allow at least 1 evaluation".into());
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cutoff_reads_none_or_a_number() {
+        let o: SlamOptions = toml::from_str("cutoff = 140\nparticles = 20").unwrap();
+        assert_eq!((o.cutoff, o.particles, o.delta), (Cutoff::Evaluations(140), 20, 0.05));
+        let o: SlamOptions = toml::from_str("cutoff = \"none\"").unwrap();
+        assert_eq!(o.cutoff, Cutoff::Unbounded);
+        assert!(toml::from_str::<SlamOptions>("cutoff = \"fast\"").is_err());
+        assert!(toml::from_str::<SlamOptions>("partcles = 3").unwrap_err().to_string().contains("partcles"));
+        assert!(SlamOptions { kernel: 9, ..SlamOptions::default() }.check().is_err());
     }
 }

@@ -29,6 +29,8 @@ struct P {
     range_max: f64,
     /// Seed; the default is the topology's seed.
     seed: Option<u64>,
+    /// Stop after this many scans.
+    max_scans: Option<u64>,
 }
 
 fn default_world() -> String {
@@ -51,6 +53,8 @@ fn default_range() -> f64 {
 #[derive(Debug)]
 pub struct SimSpout {
     world: String,
+    max_scans: Option<u64>,
+    scans: u64,
     config: SimConfig,
     sim: Option<Simulation>,
 }
@@ -68,7 +72,7 @@ impl SimSpout {
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
-        Ok(SimSpout { world: params.world, config, sim: None })
+        Ok(SimSpout { world: params.world, max_scans: params.max_scans, scans: 0, config, sim: None })
     }
 }
 
@@ -85,6 +89,9 @@ impl Spout for SimSpout {
     }
 
     async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
+        if self.max_scans.is_some_and(|m| self.scans >= m) {
+            return Ok(SpoutStatus::Done);
+        }
         let sim = self.sim.as_mut().ok_or("the simulation was not opened")?;
         match sim.next() {
             None => Ok(SpoutStatus::Done),
@@ -93,6 +100,7 @@ impl Spout for SimSpout {
                 Ok(SpoutStatus::Continue)
             }
             Some(SimEvent::Scan(scan, truth)) => {
+                self.scans += 1;
                 let stamp = scan.stamp;
                 out.emit("scan", scan).await?;
                 out.emit("truth", PoseStamped { stamp, pose: truth }).await?;

@@ -1,0 +1,104 @@
+//! `squall slam`: runs `examples/topologies/slam.toml` (embedded) with its
+//! source pointed at a CARMEN log, a ROS 2 bag or the simulated office.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use squall_topology::{Override, TopologySpec};
+
+use super::{EXIT_INVALID, report_invalid, run};
+
+const SLAM_TOML: &str = include_str!("../../examples/topologies/slam.toml");
+
+#[derive(Debug, clap::Args)]
+pub(super) struct SlamArgs {
+    /// A CARMEN log (.clf, .clf.gz) or a ROS 2 bag (folder or .mcap);
+    /// without it, the simulated office.
+    #[arg(long, value_name = "FILE")]
+    log: Option<PathBuf>,
+    /// Particles.
+    #[arg(long)]
+    particles: Option<u64>,
+    /// Pose evaluations per particle per reading: a number or `none`.
+    #[arg(long, value_name = "N|none")]
+    cutoff: Option<String>,
+    /// Matcher tasks (1 until the parallel particle filter topology lands).
+    #[arg(long, default_value_t = 1)]
+    matchers: usize,
+    /// Stop after this many scans.
+    #[arg(long)]
+    max_scans: Option<u64>,
+    /// Run seed.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Another topology file instead of the built-in slam.toml.
+    #[arg(long, value_name = "FILE")]
+    topology: Option<PathBuf>,
+    /// Override any value (as in `squall run`).
+    #[arg(long = "set", value_name = "PATH=VALUE", value_parser = super::parse_override)]
+    overrides: Vec<Override>,
+    /// Output folder.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+fn quoted(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
+    let mut sets: Vec<String> = Vec::new();
+    if args.matchers != 1 {
+        return Err(format!(
+            "--matchers {}: only 1 for now; parallel matchers come with the particle filter topology",
+            args.matchers
+        ));
+    }
+    let max_scans = args.max_scans.map_or(String::new(), |m| format!(", max_scans = {m}"));
+    match &args.log {
+        None => {
+            if let Some(m) = args.max_scans {
+                sets.push(format!("source.params.max_scans={m}"));
+            }
+        }
+        Some(path) => {
+            let name = path.to_string_lossy();
+            let is_carmen = name.ends_with(".clf") || name.ends_with(".clf.gz") || name.ends_with(".gz");
+            let (kind, key) = if is_carmen { ("carmen", "log") } else { ("rosbag2", "bag") };
+            sets.push(format!("source.kind={kind}"));
+            sets.push(format!("source.params={{ {key} = {}{max_scans} }}", quoted(&name)));
+        }
+    }
+    if let Some(p) = args.particles {
+        sets.push(format!("matcher.params.particles={p}"));
+    }
+    if let Some(c) = &args.cutoff {
+        let value = if c == "none" { quoted("none") } else { c.clone() };
+        sets.push(format!("matcher.params.cutoff={value}"));
+    }
+    if let Some(s) = args.seed {
+        sets.push(format!("topology.seed={s}"));
+    }
+    let mut out: Vec<Override> = sets.iter().map(|s| s.parse()).collect::<Result<_, _>>()?;
+    out.extend(args.overrides.iter().cloned());
+    Ok(out)
+}
+
+/// Runs `squall slam`.
+pub(super) fn slam(args: &SlamArgs) -> ExitCode {
+    let overrides = match overrides(args) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let spec = match &args.topology {
+        Some(file) => TopologySpec::load(file, &overrides),
+        None => TopologySpec::parse_with("slam.toml (built in)", SLAM_TOML, &overrides),
+    };
+    match report_invalid(spec) {
+        Ok(topology) => run::run(&topology, Some(args.out.clone()), false),
+        Err(code) => code,
+    }
+}
