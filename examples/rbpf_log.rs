@@ -41,15 +41,9 @@ fn main() -> anyhow::Result<()> {
         online.push(s.stamp, filter.estimate(&s.odometry).context("no particles")?);
     }
     let ms = started.elapsed().as_secs_f64() * 1e3 / processed.max(1) as f64;
-    let lineage = filter.best_trajectory();
     let mut last = Trajectory::default();
-    let mut k = 0;
-    for s in &scans {
-        while k + 1 < lineage.len() && lineage[k + 1].0 <= s.stamp {
-            k += 1;
-        }
-        let (_, pose, odometry) = lineage[k];
-        last.push(s.stamp, pose.compose(&s.odometry.relative_to(&odometry)));
+    for (stamp, pose) in filter.lineage_poses(scans.iter().map(|s| (s.stamp, s.odometry))) {
+        last.push(stamp, pose);
     }
     let relations = relations::read_relations(rel.as_ref())?;
     println!("{} scans, {processed} processed, {ms:.1} ms per processed scan", scans.len());

@@ -98,18 +98,11 @@ impl Bolt for SlamBolt {
 
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         let Some(filter) = &self.filter else { return Ok(()) };
-        let lineage = filter.best_trajectory();
         let (_, bytes) = TiledGrid::distinct_tiles(filter.particles().iter().map(|p| &p.map));
         out.count("map_bytes", bytes as u64);
         out.count("processed_scans", self.processed);
-        let mut k = 0;
-        for &(stamp, odometry) in &self.scans {
-            while k + 1 < lineage.len() && lineage[k + 1].0 <= stamp {
-                k += 1;
-            }
-            let Some(&(_, pose, at)) = lineage.get(k) else { break };
-            out.emit("trajectory", PoseStamped { stamp, pose: pose.compose(&odometry.relative_to(&at)) })
-                .await?;
+        for (stamp, pose) in filter.lineage_poses(self.scans.iter().copied()) {
+            out.emit("trajectory", PoseStamped { stamp, pose }).await?;
         }
         if let Some(map) = self.best_map() {
             out.emit("map", map).await?;

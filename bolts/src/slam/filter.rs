@@ -120,6 +120,24 @@ impl Rbpf {
         out
     }
 
+    /// A pose for each of `scans` (stamp, odometry), in order: the final
+    /// best particle's pose at the last processed reading at or before the
+    /// stamp, composed with the odometry since then. This is how GMapping
+    /// results are scored (and what `trajectory.tum` holds).
+    pub fn lineage_poses(&self, scans: impl IntoIterator<Item = (f64, Pose2)>) -> Vec<(f64, Pose2)> {
+        let lineage = self.best_trajectory();
+        let mut out = Vec::new();
+        let mut k = 0;
+        for (stamp, odometry) in scans {
+            while k + 1 < lineage.len() && lineage[k + 1].0 <= stamp {
+                k += 1;
+            }
+            let Some(&(_, pose, at)) = lineage.get(k) else { break };
+            out.push((stamp, pose.compose(&odometry.relative_to(&at))));
+        }
+        out
+    }
+
     /// Feeds one reading; `Some` when it was processed.
     pub fn process(&mut self, scan: &LaserReading) -> Option<StepReport> {
         let o = &self.options;
