@@ -126,6 +126,8 @@ pub enum CustomMetric {
         count: u64,
         /// Mean.
         mean: f64,
+        /// Standard deviation.
+        sd: f64,
         /// Median.
         p50: u64,
         /// 99th percentile.
@@ -144,6 +146,7 @@ fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<String, Custo
                 Custom::Values(h) => CustomMetric::Values {
                     count: h.len(),
                     mean: h.mean(),
+                    sd: h.stdev(),
                     p50: h.value_at_quantile(0.5),
                     p99: h.value_at_quantile(0.99),
                     max: h.max(),
