@@ -534,13 +534,11 @@ struct Hop {
 struct Looper {
     limit: u64,
     log: Log,
-    tick_count: Arc<AtomicU64>,
 }
 
 impl Bolt for Looper {
     fn declare(&self, d: &mut Declarer) {
         d.input::<Num>().input::<Hop>().output::<Hop>("default").output::<Hop>("done");
-        d.tick(Duration::from_millis(5));
     }
 
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
@@ -553,11 +551,6 @@ impl Bolt for Looper {
         } else {
             self.log.lock().unwrap().push(("done".into(), 0, hop.origin));
         }
-        Ok(())
-    }
-
-    async fn tick(&mut self, _out: &mut Emitter) -> Result<(), BoxError> {
-        self.tick_count.fetch_add(1, Ordering::SeqCst);
         Ok(())
     }
 }
@@ -577,15 +570,11 @@ impl Bolt for Relay {
 }
 
 #[test]
-fn feedback_loops_finish_and_ticks_fire() {
+fn feedback_loops_finish() {
     let h = Harness::new();
     let mut r = h.registry();
     let log = h.log.clone();
-    let ticks = Arc::new(AtomicU64::new(0));
-    let t2 = ticks.clone();
-    r.register_bolt("looper", move |_: &Params| {
-        Ok(Looper { limit: 5, log: log.clone(), tick_count: t2.clone() })
-    });
+    r.register_bolt("looper", move |_: &Params| Ok(Looper { limit: 5, log: log.clone() }));
     r.register_bolt("relay", |_: &Params| Ok::<_, ParamError>(Relay));
     let toml = r#"
 [topology]
@@ -608,14 +597,58 @@ kind = "relay"
 inputs = [ { from = "looper" } ]
 "#;
     let topology = Topology::validate(TopologySpec::parse("t.toml", toml).unwrap(), &r).unwrap();
-    let started = Instant::now();
+
     let report = squall_topology::run(&topology, &RunOptions::default()).unwrap();
     let mut done: Vec<u64> = h.log.lock().unwrap().iter().map(|e| e.2).collect();
     done.sort();
     assert_eq!(done, (0..200).collect::<Vec<_>>(), "every number made all its hops");
     assert_eq!(report.component("relay").unwrap().received, 200 * 5);
     assert_eq!(report.component("looper").unwrap().undelivered, 0);
-    if started.elapsed() > Duration::from_millis(30) {
-        assert!(ticks.load(Ordering::SeqCst) > 0, "ticks fire while the run lasts");
+}
+
+/// Sleeps 2 ms per tuple and counts its 1 ms ticks.
+struct Ticker {
+    ticks: Arc<AtomicU64>,
+    ticks_after_finish: Arc<AtomicU64>,
+    finished: bool,
+}
+
+impl Bolt for Ticker {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<Num>().tick(Duration::from_millis(1));
     }
+
+    async fn execute(&mut self, _input: Tuple, _out: &mut Emitter) -> Result<(), BoxError> {
+        std::thread::sleep(Duration::from_millis(2));
+        Ok(())
+    }
+
+    async fn tick(&mut self, _out: &mut Emitter) -> Result<(), BoxError> {
+        let counter = if self.finished { &self.ticks_after_finish } else { &self.ticks };
+        counter.fetch_add(1, Ordering::SeqCst);
+        Ok(())
+    }
+
+    async fn finish(&mut self, _out: &mut Emitter) -> Result<(), BoxError> {
+        self.finished = true;
+        Ok(())
+    }
+}
+
+#[test]
+fn ticks_fire_while_the_run_lasts_and_stop_at_shutdown() {
+    let h = Harness::new();
+    let mut r = h.registry();
+    let (ticks, late) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
+    let (t, l) = (ticks.clone(), late.clone());
+    r.register_bolt("ticker", move |_: &Params| {
+        Ok(Ticker { ticks: t.clone(), ticks_after_finish: l.clone(), finished: false })
+    });
+    let toml = two_stage(30, r#"grouping = "shuffle""#, 1, "").replace("\"recorder\"", "\"ticker\"");
+    let topology = Topology::validate(TopologySpec::parse("t.toml", &toml).unwrap(), &r).unwrap();
+    squall_topology::run(&topology, &RunOptions::default()).unwrap();
+    // 30 tuples × 2 ms: the run lasts 60 ms or more, ticks are due every 1 ms
+    // and are checked between batches of tuples.
+    assert!(ticks.load(Ordering::SeqCst) >= 3, "{} ticks", ticks.load(Ordering::SeqCst));
+    assert_eq!(late.load(Ordering::SeqCst), 0, "no tick after finish");
 }

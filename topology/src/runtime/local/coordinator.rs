@@ -1,7 +1,7 @@
 //! Watches a run and shuts it down in order.
 //!
-//! When every spout task is exhausted it stops the ticks and waits for
-//! quiescence (every tuple accepted by any queue resolved, read twice with
+//! When every spout task is exhausted it tells idle tasks to stop ticking
+//! and waits for quiescence (every tuple accepted by any queue resolved, read twice with
 //! equal totals); then it finishes components one at a time in dependency
 //! order: finish, quiescence again, exit. On a failure it aborts every task.
 

@@ -42,6 +42,8 @@ pub(crate) struct StreamRoute {
     pub(crate) message: MessageType,
     pub(crate) source: &'static Source,
     pub(crate) subscriptions: Vec<Subscription>,
+    /// Whether any subscription is `direct` (emits must then name a task).
+    pub(crate) has_direct: bool,
 }
 
 /// Queues of the sibling tasks for peer exchange.
@@ -218,7 +220,7 @@ impl Emitter {
     ) -> Result<(), EmitError> {
         let stream = &mut self.streams[index];
         let parent = root.or(self.anchor.as_deref());
-        if direct.is_none() && stream.subscriptions.iter().any(|s| matches!(s.route, Route::Direct)) {
+        if direct.is_none() && stream.has_direct {
             return Err(EmitError::DirectNeedsTask(stream.name.to_string()));
         }
         // The payload is moved into the last delivery rather than cloned and

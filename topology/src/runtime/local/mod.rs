@@ -2,8 +2,9 @@
 //! a coordinator that detects the end of the run and shuts down in order.
 //!
 //! Shutdown: when every spout task is exhausted (and its acked tuples
-//! settled), ticks stop and the coordinator waits for quiescence: every tuple
-//! accepted by any queue resolved, read twice with equal totals. Then it
+//! settled), idle tasks stop ticking and the coordinator waits for
+//! quiescence: every tuple accepted by any queue resolved, read twice with
+//! equal totals. Then it
 //! finishes components one at a time in dependency order (feedback edges
 //! ignored): `finish`/`close`, quiescence again, exit. Nothing in flight is
 //! lost; a tuple sent over a feedback edge to a component that has already

@@ -145,6 +145,35 @@ impl BoltTask {
     }
 }
 
+/// Calls the bolt's `tick` and schedules the next one. While the task is
+/// processing a batch (`busy`) it ticks in every stage: unreleased input
+/// keeps the run from looking quiescent anyway. An idle task stops ticking
+/// once the sources are exhausted, so that ticks cannot hold off shutdown.
+async fn tick<B: Bolt>(
+    bolt: &mut B,
+    t: &mut BoltTask,
+    next_tick: &mut Option<Instant>,
+    now: Instant,
+    busy: bool,
+) -> Result<(), BoxError> {
+    let Some(period) = t.tick else { return Ok(()) };
+    *next_tick = Some(now + period);
+    let control = t.common.control.clone();
+    control.ticking.store(true, Ordering::SeqCst);
+    let result = if busy || control.stage() < Stage::Drain {
+        let blocked_before = t.common.emitter.stats.blocked;
+        let start = Instant::now();
+        let result = bolt.tick(&mut t.common.emitter).await;
+        let stats = &mut t.common.emitter.stats;
+        stats.busy += start.elapsed().saturating_sub(stats.blocked - blocked_before);
+        result
+    } else {
+        Ok(())
+    };
+    control.ticking.store(false, Ordering::SeqCst);
+    result
+}
+
 /// Runs a bolt task until it is told to exit or abort.
 pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<(), BoxError> {
     bolt.prepare(&t.common.ctx).await?;
@@ -153,6 +182,11 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
         let mut clock = Instant::now();
         while let Some(tuple) = t.batch.pop_front() {
             clock = t.execute(bolt, tuple, clock).await?;
+            if next_tick.is_some_and(|due| clock >= due) {
+                // A busy task still ticks, between tuples.
+                tick(bolt, t, &mut next_tick, clock, true).await?;
+                clock = Instant::now();
+            }
         }
         t.release_batch();
         let stage = t.common.control.stage();
@@ -167,24 +201,9 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
         if stage >= Stage::Exit {
             return Ok(());
         }
-        if let (Some(due), Some(period)) = (next_tick, t.tick) {
-            if Instant::now() >= due {
-                next_tick = Some(Instant::now() + period);
-                let control = t.common.control.clone();
-                control.ticking.store(true, Ordering::SeqCst);
-                if control.stage() < Stage::Drain {
-                    let blocked_before = t.common.emitter.stats.blocked;
-                    let start = Instant::now();
-                    let result = bolt.tick(&mut t.common.emitter).await;
-                    let stats = &mut t.common.emitter.stats;
-                    stats.busy += start.elapsed().saturating_sub(stats.blocked - blocked_before);
-                    control.ticking.store(false, Ordering::SeqCst);
-                    result?;
-                } else {
-                    control.ticking.store(false, Ordering::SeqCst);
-                }
-                continue;
-            }
+        if next_tick.is_some_and(|due| Instant::now() >= due) {
+            tick(bolt, t, &mut next_tick, Instant::now(), false).await?;
+            continue;
         }
         if t.take_batch() || t.spin_for_input() {
             continue;

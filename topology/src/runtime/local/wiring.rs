@@ -140,7 +140,10 @@ impl Wiring {
                                         subscriptions.push(Subscription { route, targets, next });
                                     }
                                 }
+                                let has_direct =
+                                    subscriptions.iter().any(|s| matches!(s.route, Route::Direct));
                                 StreamRoute {
+                                    has_direct,
                                     name: name.clone(),
                                     message: decl.message,
                                     source: Source::Stream {
