@@ -1,20 +1,12 @@
 //! The CARMEN reader on the real logs in `../shared/data/laser`, gzip,
 //! truncation, and a mutation fuzz of the line parser.
 
+mod common;
+use common::shared;
+
 use std::io::Write;
-use std::path::{Path, PathBuf};
 
 use squall_spouts::carmen::{Laser, LineParser, LogError, ReadOptions, Record, read_log};
-
-fn shared(rel: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel);
-    assert!(
-        path.exists(),
-        "missing {}: these tests read the shared data set (../shared/data beside the repository)",
-        path.display()
-    );
-    path
-}
 
 fn front_scans(records: &[Record]) -> usize {
     records.iter().filter(|r| matches!(r, Record::Scan(Laser::Front, _))).count()

@@ -1,22 +1,13 @@
 //! The ROS 2 bag reader on `../shared/data/rosbag2/aces`, checked against
 //! the same log in CARMEN form.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::shared;
 
 use squall_bolts::eval::relations::{self, read_relations};
 use squall_bolts::eval::trajectory::Trajectory;
 use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
 use squall_spouts::rosbag2::{BagError, Topics, read_bag};
-
-fn shared(rel: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel);
-    assert!(
-        path.exists(),
-        "missing {}: these tests read the shared data set (../shared/data beside the repository)",
-        path.display()
-    );
-    path
-}
 
 /// The bag holds the same scans as the log. Their odometry poses are
 /// interpolated at the scan stamps, as on a robot; `aces.clf` instead pairs
