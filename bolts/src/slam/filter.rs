@@ -20,7 +20,7 @@ use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
-use crate::slam::matcher::{PreparedScan, likelihood_and_score, optimize};
+use crate::slam::matcher::{PreparedScan, optimize};
 use crate::slam::motion::sample_motion;
 use crate::slam::options::SlamOptions;
 use crate::slam::resample::{low_variance, normalize};
@@ -162,12 +162,11 @@ impl Rbpf {
         let mut report = StepReport::default();
         for p in &mut self.particles {
             let m = optimize(&p.map, &p.pose, &prepared, o);
-            if m.score > 0.0 {
-                p.pose = m.pose;
-            }
-            let (_, l, _) = likelihood_and_score(&p.map, &p.pose, &prepared, o);
-            p.log_weight += l;
-            p.lineage_weight += l;
+            // A climb that matched nothing leaves the pose where it was
+            // (then `m.pose` is that pose).
+            p.pose = m.pose;
+            p.log_weight += m.log_likelihood;
+            p.lineage_weight += m.log_likelihood;
             report.evaluations.push(m.evaluations);
         }
         let logs: Vec<Real> = self.particles.iter().map(|p| p.log_weight).collect();

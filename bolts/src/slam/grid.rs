@@ -29,13 +29,47 @@ fn floor(v: Real) -> i64 {
     if (t as Real) > v { t - 1 } else { t }
 }
 
+/// Bresenham's line from one cell to another, a cell per step (the same
+/// cells as [`crate::geometry::line_cells`]).
+#[derive(Debug)]
+struct Line {
+    at: (i64, i64),
+    d: (i64, i64),
+    s: (i64, i64),
+    err: i64,
+}
+
+impl Line {
+    fn new(a: (i64, i64), b: (i64, i64)) -> Self {
+        let d = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
+        let s = (if a.0 < b.0 { 1 } else { -1 }, if a.1 < b.1 { 1 } else { -1 });
+        Line { at: a, d, s, err: d.0 + d.1 }
+    }
+
+    /// The next cell (call only before reaching the end).
+    #[inline]
+    fn step(&mut self) -> (i64, i64) {
+        let e2 = 2 * self.err;
+        if e2 >= self.d.1 {
+            self.err += self.d.1;
+            self.at.0 += self.s.0;
+        }
+        if e2 <= self.d.0 {
+            self.err += self.d.0;
+            self.at.1 += self.s.1;
+        }
+        self.at
+    }
+}
+
 /// What one cell has seen.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Cell {
-    /// Sum of the x of the beam end points in this cell, metres.
-    pub sum_x: f32,
-    /// Sum of their y, metres.
-    pub sum_y: f32,
+    /// Mean x of the beam end points in this cell, metres (kept as a mean
+    /// so the scan matcher reads it without dividing).
+    pub mean_x: f32,
+    /// Their mean y, metres.
+    pub mean_y: f32,
     /// Beams that ended here.
     pub hits: u32,
     /// Beams that crossed or ended here.
@@ -50,31 +84,56 @@ impl Cell {
 
     /// Mean of the hit points, if any beam ended here.
     pub fn mean(&self) -> Option<(Real, Real)> {
-        (self.hits > 0).then(|| {
-            let n = Real::from(self.hits);
-            (Real::from(self.sum_x) / n, Real::from(self.sum_y) / n)
-        })
+        (self.hits > 0).then(|| (Real::from(self.mean_x), Real::from(self.mean_y)))
+    }
+
+    /// A beam ended here, at (`x`, `y`).
+    #[inline]
+    pub fn add_hit(&mut self, x: f32, y: f32) {
+        self.visits += 1;
+        self.hits += 1;
+        let n = self.hits as f32;
+        self.mean_x += (x - self.mean_x) / n;
+        self.mean_y += (y - self.mean_y) / n;
     }
 }
 
 /// A square block of cells, with one bit per cell saying whether it is a
-/// wall (so the scan matcher can skip the many cells that are not without
-/// reading them).
+/// wall and one saying whether it is free, so the scan matcher finds the
+/// few candidate cells of a beam with bit operations before reading any.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tile {
     cells: Box<[Cell; TILE_SIDE * TILE_SIDE]>,
     /// Bit x of `walls[y]`: cell (x, y) of the tile is a wall.
     walls: [u32; TILE_SIDE],
+    /// Bit x of `free[y]`: cell (x, y) is free (see [`Cell::is_free`]).
+    free: [u32; TILE_SIDE],
 }
 
 impl Default for Tile {
     fn default() -> Self {
-        Tile { cells: Box::new([Cell::default(); TILE_SIDE * TILE_SIDE]), walls: [0; TILE_SIDE] }
+        Tile {
+            cells: Box::new([Cell::default(); TILE_SIDE * TILE_SIDE]),
+            walls: [0; TILE_SIDE],
+            free: [u32::MAX; TILE_SIDE],
+        }
+    }
+}
+
+impl Tile {
+    /// Changes cell (`x`, `y`) of the tile with `f` and keeps its bits.
+    #[inline]
+    fn update(&mut self, x: usize, y: usize, threshold: Real, f: impl FnOnce(&mut Cell)) {
+        let cell = &mut self.cells[y * TILE_SIDE + x];
+        f(cell);
+        let (wall, free) = (cell.is_wall(threshold), cell.is_free(threshold));
+        self.walls[y] = (self.walls[y] & !(1 << x)) | (u32::from(wall) << x);
+        self.free[y] = (self.free[y] & !(1 << x)) | (u32::from(free) << x);
     }
 }
 
 /// Bytes one tile occupies.
-pub const TILE_BYTES: usize = std::mem::size_of::<Cell>() * TILE_SIDE * TILE_SIDE + 4 * TILE_SIDE;
+pub const TILE_BYTES: usize = std::mem::size_of::<Cell>() * TILE_SIDE * TILE_SIDE + 8 * TILE_SIDE;
 
 /// Occupancy above which a cell is a wall, unless set otherwise.
 pub const DEFAULT_WALL_THRESHOLD: Real = 0.1;
@@ -85,6 +144,14 @@ impl Cell {
     pub fn is_wall(&self, threshold: Real) -> bool {
         self.visits > 0 && Real::from(self.hits) > threshold * Real::from(self.visits)
     }
+
+    /// Whether the cell is free for matching: hits/visits below the
+    /// threshold, or never visited (GMapping reads unknown cells as
+    /// occupancy −1).
+    #[inline]
+    pub fn is_free(&self, threshold: Real) -> bool {
+        self.visits == 0 || Real::from(self.hits) < threshold * Real::from(self.visits)
+    }
 }
 
 /// An occupancy grid that grows on demand; cell (0, 0) is at world
@@ -92,6 +159,8 @@ impl Cell {
 #[derive(Debug, Clone)]
 pub struct TiledGrid {
     resolution: Real,
+    /// 1 / `resolution`: a cell lookup multiplies rather than divides.
+    per_metre: Real,
     origin: (Real, Real),
     /// Tile coordinates of `tiles[0]`.
     tile_min: (i64, i64),
@@ -112,6 +181,7 @@ impl TiledGrid {
     pub fn new(resolution: Real, origin: (Real, Real)) -> Self {
         TiledGrid {
             resolution,
+            per_metre: 1.0 / resolution,
             origin,
             tile_min: (0, 0),
             tiles_wide: 0,
@@ -145,7 +215,7 @@ impl TiledGrid {
     /// The cell containing world point (`x`, `y`).
     #[inline]
     pub fn cell_of(&self, x: Real, y: Real) -> (i64, i64) {
-        (floor((x - self.origin.0) / self.resolution), floor((y - self.origin.1) / self.resolution))
+        (floor((x - self.origin.0) * self.per_metre), floor((y - self.origin.1) * self.per_metre))
     }
 
     fn slot(&self, tile: (i64, i64)) -> Option<usize> {
@@ -204,8 +274,19 @@ impl TiledGrid {
         self.reserve((lo.0 >> TILE_SHIFT, lo.1 >> TILE_SHIFT), (hi.0 >> TILE_SHIFT, hi.1 >> TILE_SHIFT));
     }
 
+    /// The tile at `slot`, created if missing, cloned first if another map
+    /// shares it.
+    #[inline]
+    fn tile_mut(&mut self, slot: usize) -> &mut Tile {
+        let entry = self.tiles[slot].get_or_insert_with(|| Arc::new(Tile::default()));
+        if Arc::strong_count(entry) > 1 {
+            self.clones += 1;
+        }
+        Arc::make_mut(entry)
+    }
+
     /// Changes cell `c` with `f`: its tile is created, or cloned if another
-    /// map shares it; the wall bit follows the new value.
+    /// map shares it; the wall and free bits follow the new value.
     #[inline]
     pub fn update(&mut self, c: (i64, i64), f: impl FnOnce(&mut Cell)) {
         let tile = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
@@ -217,54 +298,149 @@ impl TiledGrid {
             }
         };
         let threshold = self.wall_threshold;
-        let entry = self.tiles[slot].get_or_insert_with(|| Arc::new(Tile::default()));
-        if Arc::strong_count(entry) > 1 {
-            self.clones += 1;
-        }
-        let tile = Arc::make_mut(entry);
-        let (x, y) = ((c.0 & TILE_MASK) as usize, (c.1 & TILE_MASK) as usize);
-        let cell = &mut tile.cells[y * TILE_SIDE + x];
-        f(cell);
-        if cell.is_wall(threshold) {
-            tile.walls[y] |= 1 << x;
-        } else {
-            tile.walls[y] &= !(1 << x);
+        self.tile_mut(slot).update((c.0 & TILE_MASK) as usize, (c.1 & TILE_MASK) as usize, threshold, f);
+    }
+
+    /// Adds one beam from cell `from` to cell `to`: every cell on the line
+    /// before `to` gets a visit; `to` gets a hit at `end` if given, nothing
+    /// otherwise (a beam cut at the usable range). The line is walked tile
+    /// by tile, so each tile is looked up and made writable once per beam.
+    pub fn add_beam(&mut self, from: (i64, i64), to: (i64, i64), end: Option<(f32, f32)>) {
+        self.reserve_cells((from.0.min(to.0), from.1.min(to.1)), (from.0.max(to.0), from.1.max(to.1)));
+        let threshold = self.wall_threshold;
+        let mut line = Line::new(from, to);
+        let mut c = from;
+        loop {
+            let key = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
+            let slot = self.slot(key).expect("the beam's box is reserved");
+            let tile = self.tile_mut(slot);
+            loop {
+                let (x, y) = ((c.0 & TILE_MASK) as usize, (c.1 & TILE_MASK) as usize);
+                if c == to {
+                    if let Some((ex, ey)) = end {
+                        tile.update(x, y, threshold, |cell| cell.add_hit(ex, ey));
+                    }
+                    return;
+                }
+                tile.update(x, y, threshold, |cell| cell.visits += 1);
+                c = line.step();
+                if (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT) != key {
+                    break;
+                }
+            }
         }
     }
 
-    /// Calls `visit(cell, value)` for the walls within `k` cells of
-    /// `centre`, column by column (x outer, y inner), reading only the wall
-    /// bits of the others.
+    /// GMapping's kernel search for one beam: the squared distance (m²)
+    /// from the beam's end point `hit` to the nearest mean hit point among
+    /// the wall cells within `k` cells of it whose neighbour at `back` (one
+    /// step back towards the laser, each component in −1..=1) is free;
+    /// `None` if there is none. `k` is at most 14.
     #[inline]
-    pub fn for_each_wall_in_square(
+    pub fn nearest_backed_wall(&self, hit: (Real, Real), back: (i64, i64), k: i64) -> Option<Real> {
+        let (hx, hy) = (hit.0 as f32, hit.1 as f32);
+        let mut best = f32::INFINITY;
+        self.backed_walls(self.cell_of(hit.0, hit.1), back, k, |mx, my| {
+            best = best.min((hx - mx).powi(2) + (hy - my).powi(2));
+        });
+        (best < f32::INFINITY).then_some(Real::from(best))
+    }
+
+    /// The candidates of [`Self::nearest_backed_wall`] around cell
+    /// `centre`: calls `visit(mean x, mean y)` for each wall cell within
+    /// `k` cells whose neighbour at `back` is free, row by row. The scan
+    /// matcher caches these per beam, since a beam's end point stays in
+    /// one cell over many poses of a climb.
+    #[inline(always)]
+    pub fn backed_walls(
         &self,
         centre: (i64, i64),
+        back: (i64, i64),
         k: i64,
-        mut visit: impl FnMut((i64, i64), Cell),
+        mut visit: impl FnMut(f32, f32),
     ) {
-        let (lo, hi) = ((centre.0 - k, centre.1 - k), (centre.0 + k, centre.1 + k));
-        let tile = (lo.0 >> TILE_SHIFT, lo.1 >> TILE_SHIFT);
-        if (hi.0 >> TILE_SHIFT, hi.1 >> TILE_SHIFT) == tile {
-            let Some(t) = self.slot(tile).and_then(|s| self.tiles[s].as_deref()) else { return };
-            for x in lo.0..=hi.0 {
-                let bx = (x & TILE_MASK) as usize;
-                for y in lo.1..=hi.1 {
-                    let by = (y & TILE_MASK) as usize;
-                    if t.walls[by] >> bx & 1 == 1 {
-                        visit((x, y), t.cells[by * TILE_SIDE + bx]);
-                    }
-                }
+        let (lx, ly) = (centre.0 & TILE_MASK, centre.1 & TILE_MASK);
+        let reach = k + 1;
+        debug_assert!((0..=14).contains(&k), "a window row fits in 32 bits");
+        if lx < reach || ly < reach || lx + reach > TILE_MASK || ly + reach > TILE_MASK {
+            return self.backed_walls_across_tiles(centre, back, k, visit);
+        }
+        // The window and its back neighbours lie in one tile: find the
+        // candidates with bit operations.
+        let Some(t) = self
+            .slot((centre.0 >> TILE_SHIFT, centre.1 >> TILE_SHIFT))
+            .and_then(|s| self.tiles[s].as_deref())
+        else {
+            return;
+        };
+        let width = (1u32 << (2 * k + 1)) - 1;
+        let x0 = (lx - k) as u32;
+        let bx = (lx - k + back.0) as u32;
+        for y in (ly - k) as usize..=(ly + k) as usize {
+            let walls = (t.walls[y] >> x0) & width;
+            if walls == 0 {
+                continue;
             }
-        } else {
-            for x in lo.0..=hi.0 {
-                for y in lo.1..=hi.1 {
-                    let cell = self.get((x, y));
-                    if cell.is_wall(self.wall_threshold) {
-                        visit((x, y), cell);
-                    }
-                }
+            let free = (t.free[(y as i64 + back.1) as usize] >> bx) & width;
+            let mut candidates = walls & free;
+            while candidates != 0 {
+                let x = x0 as usize + candidates.trailing_zeros() as usize;
+                candidates &= candidates - 1;
+                let cell = &t.cells[y * TILE_SIDE + x];
+                visit(cell.mean_x, cell.mean_y);
             }
         }
+    }
+
+    /// [`Self::backed_walls`] for windows that cross tiles: the bits are
+    /// gathered row by row.
+    #[cold]
+    fn backed_walls_across_tiles(
+        &self,
+        c: (i64, i64),
+        back: (i64, i64),
+        k: i64,
+        mut visit: impl FnMut(f32, f32),
+    ) {
+        let n = 2 * k + 1;
+        for y in c.1 - k..=c.1 + k {
+            let (walls, _) = self.row_bits(c.0 - k, y, n);
+            if walls == 0 {
+                continue;
+            }
+            let (_, free) = self.row_bits(c.0 - k + back.0, y + back.1, n);
+            let mut candidates = walls & free;
+            while candidates != 0 {
+                let x = c.0 - k + i64::from(candidates.trailing_zeros());
+                candidates &= candidates - 1;
+                let cell = self.get((x, y));
+                visit(cell.mean_x, cell.mean_y);
+            }
+        }
+    }
+
+    /// The wall and free bits of the `n` ≤ 32 cells from (`x0`, `y`) along
+    /// +x, bit i for cell `x0 + i`, gathered across tiles (cells without a
+    /// tile are free).
+    #[inline]
+    fn row_bits(&self, x0: i64, y: i64, n: i64) -> (u32, u32) {
+        let (mut walls, mut free) = (0u64, 0u64);
+        let ty = (y & TILE_MASK) as usize;
+        let mut x = x0;
+        while x < x0 + n {
+            let lx = x & TILE_MASK;
+            let take = (TILE_SIDE as i64 - lx).min(x0 + n - x);
+            let (w, f) =
+                match self.slot((x >> TILE_SHIFT, y >> TILE_SHIFT)).and_then(|s| self.tiles[s].as_deref()) {
+                    Some(t) => (t.walls[ty], t.free[ty]),
+                    None => (0, u32::MAX),
+                };
+            let mask = (1u64 << take) - 1;
+            walls |= ((u64::from(w) >> lx) & mask) << (x - x0);
+            free |= ((u64::from(f) >> lx) & mask) << (x - x0);
+            x += take;
+        }
+        (walls as u32, free as u32)
     }
 
     /// Tiles cloned by copy-on-write since the last call.
@@ -368,7 +544,7 @@ mod tests {
     #[test]
     fn exports_the_explored_area() {
         let mut g = TiledGrid::new(0.5, (10.0, 20.0));
-        g.update((1, 2), |c| *c = Cell { sum_x: 0.0, sum_y: 0.0, hits: 1, visits: 4 });
+        g.update((1, 2), |c| *c = Cell { hits: 1, visits: 4, ..Cell::default() });
         g.update((-1, 0), |c| c.visits = 2);
         let o = g.to_occupancy();
         assert_eq!((o.width, o.height), (64, 32), "two tiles side by side");
@@ -387,40 +563,117 @@ mod tests {
         }
     }
 
+    /// A deterministic pseudo-random sequence for test data.
+    fn lcg(state: &mut u64) -> u64 {
+        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *state >> 33
+    }
+
     #[test]
-    fn wall_reads_match_single_reads() {
+    fn kernel_search_matches_a_cell_by_cell_search() {
         let mut g = TiledGrid::new(0.1, (0.0, 0.0));
-        // Occupancies 1/2, 2/13, 3/22 (walls) and 4/4, 5/14 (walls), plus a free cell.
-        for (i, c) in [(0, 0), (31, 31), (32, 32), (-1, 5), (15, -33)].into_iter().enumerate() {
-            g.update(c, |cell| {
-                *cell = Cell { hits: i as u32 + 1, visits: 2 + i as u32 % 3 * 9, ..Cell::default() }
-            });
+        let mut state = 7;
+        // Cells over four tiles around the origin: walls, free cells and
+        // cells at the threshold (neither).
+        for _ in 0..1500 {
+            let c = ((lcg(&mut state) % 80) as i64 - 40, (lcg(&mut state) % 80) as i64 - 40);
+            let (hits, visits) = match lcg(&mut state) % 3 {
+                0 => (1 + lcg(&mut state) as u32 % 3, 4),
+                1 => (0, 1 + lcg(&mut state) as u32 % 5),
+                _ => (1, 10),
+            };
+            let m = (c.0 as f32 * 0.1 + 0.05, c.1 as f32 * 0.1 + 0.02);
+            g.update(c, |cell| *cell = Cell { mean_x: m.0, mean_y: m.1, hits, visits });
         }
-        g.update((1, 1), |c| c.visits = 5);
-        // A wall that becomes free again loses its bit.
-        g.update((2, 2), |c| *c = Cell { hits: 1, visits: 1, ..Cell::default() });
-        g.update((2, 2), |c| c.visits = 100);
-        // Centres inside a tile, on tile corners and edges, and in empty space.
-        for centre in [(1, 1), (31, 31), (32, 0), (0, -1), (-33, 15), (500, 500), (2, 2)] {
-            for k in [0, 1, 2] {
-                let mut seen = Vec::new();
-                g.for_each_wall_in_square(centre, k, |c, cell| seen.push((c, cell)));
-                let mut expected = Vec::new();
-                for x in centre.0 - k..=centre.0 + k {
-                    for y in centre.1 - k..=centre.1 + k {
-                        if g.get((x, y)).is_wall(0.1) {
-                            expected.push(((x, y), g.get((x, y))));
-                        }
+        let reference = |hit: (Real, Real), back: (i64, i64), k: i64| {
+            let c = g.cell_of(hit.0, hit.1);
+            let mut best: Option<f32> = None;
+            for y in c.1 - k..=c.1 + k {
+                for x in c.0 - k..=c.0 + k {
+                    let cell = g.get((x, y));
+                    let behind = g.get((x + back.0, y + back.1));
+                    let wall = cell.visits > 0 && cell.hits as Real > 0.1 * cell.visits as Real;
+                    let free = behind.visits == 0 || (behind.hits as Real) < 0.1 * behind.visits as Real;
+                    if wall && free {
+                        let d2 = (hit.0 as f32 - cell.mean_x).powi(2) + (hit.1 as f32 - cell.mean_y).powi(2);
+                        best = Some(best.map_or(d2, |b| b.min(d2)));
                     }
                 }
-                assert_eq!(seen, expected, "{centre:?} k {k}");
+            }
+            best.map(Real::from)
+        };
+        let mut matched = 0;
+        for _ in 0..3000 {
+            let hit = (
+                (lcg(&mut state) % 9000) as Real * 1e-3 - 4.5,
+                (lcg(&mut state) % 9000) as Real * 1e-3 - 4.5,
+            );
+            for back in [(-1, -1), (-1, 0), (0, 1), (1, 1), (1, -1), (0, 0)] {
+                for k in [0, 1, 2] {
+                    let got = g.nearest_backed_wall(hit, back, k);
+                    assert_eq!(got, reference(hit, back, k), "{hit:?} back {back:?} k {k}");
+                    matched += usize::from(got.is_some());
+                }
+            }
+        }
+        assert!(matched > 10_000, "the data exercises matches: {matched}");
+    }
+
+    #[test]
+    fn a_beam_updates_the_cells_of_its_line_across_tiles() {
+        let mut fast = TiledGrid::new(0.1, (0.0, 0.0));
+        let mut slow = TiledGrid::new(0.1, (0.0, 0.0));
+        let mut state = 3;
+        for i in 0..400 {
+            let from = ((lcg(&mut state) % 20) as i64 - 10, (lcg(&mut state) % 20) as i64 - 10);
+            let to = ((lcg(&mut state) % 200) as i64 - 100, (lcg(&mut state) % 200) as i64 - 100);
+            let end = (i % 3 != 0).then_some((to.0 as f32 * 0.1 + 0.03, to.1 as f32 * 0.1 + 0.07));
+            fast.add_beam(from, to, end);
+            crate::geometry::line_cells(from, to, |c| {
+                if c != to {
+                    slow.update(c, |cell| cell.visits += 1);
+                }
+            });
+            if let Some((x, y)) = end {
+                slow.update(to, |cell| cell.add_hit(x, y));
+            }
+        }
+        assert_eq!(fast.cell_bounds(), slow.cell_bounds());
+        let ((x0, y0), (x1, y1)) = fast.cell_bounds().unwrap();
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                assert_eq!(fast.get((x, y)), slow.get((x, y)), "({x}, {y})");
+            }
+        }
+        // The bits agree too: every window finds the same wall.
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let hit = (x as Real * 0.1 + 0.05, y as Real * 0.1 + 0.05);
+                assert_eq!(
+                    fast.nearest_backed_wall(hit, (1, 0), 1),
+                    slow.nearest_backed_wall(hit, (1, 0), 1)
+                );
             }
         }
     }
 
     #[test]
+    fn a_shared_tile_is_cloned_once_per_beam() {
+        let mut a = TiledGrid::new(0.1, (0.0, 0.0));
+        a.add_beam((0, 0), (20, 0), Some((2.05, 0.05)));
+        let mut b = a.clone();
+        b.take_clone_count();
+        b.add_beam((0, 1), (25, 1), Some((2.55, 0.15)));
+        assert_eq!(b.take_clone_count(), 1, "26 cells, one tile, one clone");
+        assert_eq!(a.get((5, 1)).visits, 0, "the original is untouched");
+    }
+
+    #[test]
     fn occupancy_and_mean_hit() {
-        let c = Cell { sum_x: 3.0, sum_y: 9.0, hits: 3, visits: 4 };
+        let mut c = Cell { visits: 1, ..Cell::default() };
+        for (x, y) in [(0.5, 2.0), (1.0, 3.0), (1.5, 4.0)] {
+            c.add_hit(x, y);
+        }
         assert_eq!(c.occupancy(), Some(0.75));
         assert_eq!(c.mean(), Some((1.0, 3.0)));
         assert_eq!(Cell::default().occupancy(), None);

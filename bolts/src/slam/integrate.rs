@@ -4,7 +4,7 @@
 //! returns and are skipped; beams longer than the usable range are cut there
 //! and mark free space only.
 
-use crate::geometry::{Pose2, Real, line_cells};
+use crate::geometry::{Pose2, Real};
 use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 
@@ -23,19 +23,7 @@ pub fn integrate_scan(grid: &mut TiledGrid, robot: &Pose2, scan: &LaserReading, 
         let angle = laser.theta + scan.beam_angle(i);
         let end = (laser.x + range * angle.cos(), laser.y + range * angle.sin());
         let end_cell = grid.cell_of(end.0, end.1);
-        line_cells(start, end_cell, |c| {
-            if c != end_cell {
-                grid.update(c, |cell| cell.visits += 1);
-            }
-        });
-        if !cut {
-            grid.update(end_cell, |cell| {
-                cell.visits += 1;
-                cell.hits += 1;
-                cell.sum_x += end.0 as f32;
-                cell.sum_y += end.1 as f32;
-            });
-        }
+        grid.add_beam(start, end_cell, (!cut).then_some((end.0 as f32, end.1 as f32)));
         used += 1;
     }
     used

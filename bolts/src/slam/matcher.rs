@@ -9,25 +9,30 @@
 //! x and y and ±astep in θ, halving the steps when no move improves,
 //! `iterations` times; a [`Cutoff`] bounds the pose evaluations.
 //!
-//! One deliberate change: GMapping locates the "free" cell with
+//! Two deliberate changes. Poses are kept on a lattice of the finest step,
+//! and a pose the climb has scored before is not scored again (it was not
+//! better then, and the current score has only risen since), which saves
+//! evaluations without changing the path. And GMapping locates the "free" cell with
 //! `world2map(pfree − phit)` where `pfree` lies δ²√2 before the hit, which
 //! only works through the map's offset; here it is the cell one step back
 //! along the beam, as intended.
 
 use crate::geometry::{Pose2, Real};
 use crate::sensor::LaserReading;
-use crate::slam::grid::{Cell, TiledGrid};
+use crate::slam::grid::TiledGrid;
 use crate::slam::options::{Cutoff, SlamOptions};
 
 /// GMapping's log-likelihood of a beam that matches nothing, before
 /// division by lσ.
 const NULL_LIKELIHOOD: Real = -0.5;
 
-/// One beam to match: its angle in the laser frame and its range.
+/// One beam to match: its range and the (cos, sin) of its angle in the
+/// laser frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Beam {
-    angle: Real,
     range: Real,
+    cos: Real,
+    sin: Real,
 }
 
 /// A reading prepared for matching: usable beams only.
@@ -44,7 +49,10 @@ impl PreparedScan {
             .filter(|&i| {
                 i % (o.lskip + 1) == 0 && scan.is_valid(i) && Real::from(scan.ranges[i]) <= o.max_urange
             })
-            .map(|i| Beam { angle: scan.beam_angle(i), range: Real::from(scan.ranges[i]) })
+            .map(|i| {
+                let (sin, cos) = scan.beam_angle(i).sin_cos();
+                Beam { range: Real::from(scan.ranges[i]), cos, sin }
+            })
             .collect();
         PreparedScan { beams, laser_offset: scan.laser_offset }
     }
@@ -60,35 +68,148 @@ impl PreparedScan {
     }
 }
 
-/// Whether `c` is free for matching: hits/visits below the threshold, or
-/// never visited (GMapping reads unknown cells as occupancy −1).
-#[inline]
-fn is_free(c: &Cell, threshold: Real) -> bool {
-    c.visits == 0 || Real::from(c.hits) < threshold * Real::from(c.visits)
-}
-
-/// A beam's world direction for one laser heading: (cos, sin) and the
-/// cell step from its end point back towards the laser.
+/// A beam seen with the laser at one heading: its end point relative to
+/// the laser (world frame, metres) and the cell step from the end point
+/// back towards the laser.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Direction {
-    cos: Real,
-    sin: Real,
+    dx: Real,
+    dy: Real,
     back: (i64, i64),
+}
+
+/// `round(−c·√2)`: the step back along a beam whose direction has
+/// component `c`, one of −1, 0, 1.
+#[inline]
+fn step_back(c: Real) -> i64 {
+    const HALF_STEP: Real = 0.5 * std::f64::consts::FRAC_1_SQRT_2;
+    i64::from(c <= -HALF_STEP) - i64::from(c >= HALF_STEP)
 }
 
 /// The directions of every beam with the laser at heading `theta`. Moves
 /// that only translate keep the heading, so the hill climber computes these
-/// once per heading rather than once per pose.
+/// once per heading rather than once per pose; each beam's direction is
+/// its laser-frame direction rotated, with no trigonometry per beam.
 fn directions(scan: &PreparedScan, theta: Real, out: &mut Vec<Direction>) {
+    let (s, c) = theta.sin_cos();
     out.clear();
     out.extend(scan.beams.iter().map(|b| {
-        let (sin, cos) = (theta + b.angle).sin_cos();
-        let back = (
-            (-cos * std::f64::consts::SQRT_2).round() as i64,
-            (-sin * std::f64::consts::SQRT_2).round() as i64,
-        );
-        Direction { cos, sin, back }
+        let (cos, sin) = (c * b.cos - s * b.sin, s * b.cos + c * b.sin);
+        Direction { dx: b.range * cos, dy: b.range * sin, back: (step_back(cos), step_back(sin)) }
     }));
+}
+
+/// 2^(−j/16) for j = 0..16.
+const EXP2_SIXTEENTHS: [Real; 16] = [
+    1.0,
+    0.957_603_280_698_573_7,
+    0.917_004_043_204_671_2,
+    0.878_126_080_186_649_7,
+    0.840_896_415_253_714_5,
+    0.805_245_165_974_627_1,
+    0.771_105_412_703_970_4,
+    0.738_413_072_969_749_7,
+    0.707_106_781_186_547_6,
+    0.677_127_773_468_446_3,
+    0.648_419_777_325_504_8,
+    0.620_928_906_036_742,
+    0.594_603_557_501_360_5,
+    0.569_394_317_378_345_8,
+    0.545_253_866_332_628_8,
+    0.522_136_891_213_706_9,
+];
+
+/// e^(−x) for x ≥ 0 to about 1e-15 relative, 0 from 700 on; inline and
+/// branch-free, so that a loop of them runs at the processor's throughput
+/// (the score takes one per matched beam, and a libm call there cost a
+/// tenth of the run).
+#[inline(always)]
+fn exp_neg(x: Real) -> Real {
+    let clamped = x.min(700.0);
+    // e^(−x) = 2^(−n/16) · e^(−r), n = round(16 x / ln 2), |r| ≤ ln 2 / 32.
+    let n = (clamped * (16.0 * std::f64::consts::LOG2_E) + 0.5) as i64;
+    let t = n as Real * (std::f64::consts::LN_2 / 16.0) - clamped;
+    let p = 1.0
+        + t * (1.0 + t * (0.5 + t * (1.0 / 6.0 + t * (1.0 / 24.0 + t * (1.0 / 120.0 + t * (1.0 / 720.0))))));
+    let v = p * EXP2_SIXTEENTHS[(n & 15) as usize] * Real::from_bits(((1023 - (n >> 4)) as u64) << 52);
+    if x < 700.0 { v } else { 0.0 }
+}
+
+/// What a climb remembers of the map: for each (cell, step back) it has
+/// looked at, the candidate mean hit points there, in a direct-mapped
+/// table. The climb's steps are a cell or less, so its poses keep landing
+/// beams in the same few cells of each beam's neighbourhood, and those are
+/// read from the map once. The result is exactly that of
+/// [`TiledGrid::nearest_backed_wall`].
+#[derive(Debug)]
+struct BeamCache {
+    slots: Vec<Slot>,
+    means: Vec<(f32, f32)>,
+    /// The per-beam exponents d²/σ of the pose being scored.
+    exponents: Vec<Real>,
+}
+
+/// One remembered (cell, step back) and where its candidates are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Slot {
+    cell: (i32, i32),
+    back: (i8, i8),
+    start: u32,
+    end: u32,
+}
+
+const EMPTY_SLOT: Slot = Slot { cell: (i32::MIN, i32::MIN), back: (0, 0), start: 0, end: 0 };
+/// Table slots (a power of two).
+const CACHE_SLOTS: usize = 1 << 12;
+/// Candidates kept before the cache starts over (bounds its memory).
+const CACHE_CAPACITY: usize = 1 << 16;
+
+impl BeamCache {
+    fn new(beams: usize) -> Self {
+        BeamCache {
+            slots: vec![EMPTY_SLOT; CACHE_SLOTS],
+            means: Vec::with_capacity(4096),
+            exponents: Vec::with_capacity(beams),
+        }
+    }
+
+    #[inline(always)]
+    fn nearest(&mut self, grid: &TiledGrid, hit: (Real, Real), back: (i64, i64), k: i64) -> Option<Real> {
+        let c = grid.cell_of(hit.0, hit.1);
+        let (hx, hy) = (hit.0 as f32, hit.1 as f32);
+        let mut best = f32::INFINITY;
+        let mut closest = |mx: f32, my: f32| best = best.min((hx - mx).powi(2) + (hy - my).powi(2));
+        match (i32::try_from(c.0), i32::try_from(c.1)) {
+            (Ok(x), Ok(y)) => {
+                let back8 = (back.0 as i8, back.1 as i8);
+                let hash = (x as u32).wrapping_mul(0x9e37_79b1)
+                    ^ (y as u32).wrapping_mul(0x85eb_ca77)
+                    ^ ((back.0 + 3 * back.1 + 4) as u32).wrapping_mul(0xc2b2_ae3d);
+                let index = (hash >> (32 - CACHE_SLOTS.trailing_zeros())) as usize;
+                let slot = self.slots[index];
+                let slot = if slot.cell == (x, y) && slot.back == back8 {
+                    slot
+                } else {
+                    if self.means.len() > CACHE_CAPACITY {
+                        self.means.clear();
+                        self.slots.fill(EMPTY_SLOT);
+                    }
+                    let start = self.means.len() as u32;
+                    let means = &mut self.means;
+                    grid.backed_walls(c, back, k, |mx, my| means.push((mx, my)));
+                    let fresh = Slot { cell: (x, y), back: back8, start, end: self.means.len() as u32 };
+                    self.slots[index] = fresh;
+                    fresh
+                };
+                for &(mx, my) in &self.means[slot.start as usize..slot.end as usize] {
+                    closest(mx, my);
+                }
+            }
+            // Cells beyond ±2³¹ (thousands of kilometres) are not cached.
+            _ => grid.backed_walls(c, back, k, closest),
+        }
+        (best < f32::INFINITY).then_some(Real::from(best))
+    }
 }
 
 /// For each beam, the squared distance from its end point to the best mean
@@ -101,27 +222,12 @@ fn match_beams(
     scan: &PreparedScan,
     dirs: &[Direction],
     o: &SlamOptions,
+    cache: &mut BeamCache,
     mut each: impl FnMut(Option<Real>),
 ) {
     let laser = pose.compose(&scan.laser_offset);
-    let k = o.kernel;
-    let threshold = grid.wall_threshold();
-    for (b, d) in scan.beams.iter().zip(dirs) {
-        let hit = (laser.x + b.range * d.cos, laser.y + b.range * d.sin);
-        let centre = grid.cell_of(hit.0, hit.1);
-        let mut best: Option<Real> = None;
-        grid.for_each_wall_in_square(centre, k, |pr, cell| {
-            let free = grid.get((pr.0 + d.back.0, pr.1 + d.back.1));
-            if !is_free(&free, threshold) {
-                return;
-            }
-            let (mx, my) = cell.mean().expect("an occupied cell has hits");
-            let d2 = (hit.0 - mx).powi(2) + (hit.1 - my).powi(2);
-            if best.is_none_or(|b| d2 < b) {
-                best = Some(d2);
-            }
-        });
-        each(best);
+    for d in dirs {
+        each(cache.nearest(grid, (laser.x + d.dx, laser.y + d.dy), d.back, o.kernel));
     }
 }
 
@@ -129,19 +235,25 @@ fn laser_heading(pose: &Pose2, scan: &PreparedScan) -> Real {
     pose.compose(&scan.laser_offset).theta
 }
 
+/// The score: the sum over matched beams of e^(−d²/σ). The exponents are
+/// gathered first and exponentiated in a second loop whose iterations are
+/// independent.
 fn score_with(
     grid: &TiledGrid,
     pose: &Pose2,
     scan: &PreparedScan,
     dirs: &[Direction],
     o: &SlamOptions,
+    cache: &mut BeamCache,
 ) -> Real {
-    let mut s = 0.0;
-    match_beams(grid, pose, scan, dirs, o, |d2| {
-        if let Some(d2) = d2 {
-            s += (-d2 / o.sigma).exp();
-        }
+    let per_sigma = 1.0 / o.sigma;
+    let mut exponents = std::mem::take(&mut cache.exponents);
+    exponents.clear();
+    match_beams(grid, pose, scan, dirs, o, cache, |d2| {
+        exponents.push(d2.map_or(Real::INFINITY, |d2| d2 * per_sigma));
     });
+    let s = exponents.iter().map(|&x| exp_neg(x)).sum();
+    cache.exponents = exponents;
     s
 }
 
@@ -149,7 +261,7 @@ fn score_with(
 pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
     let mut dirs = Vec::with_capacity(scan.beams.len());
     directions(scan, laser_heading(pose, scan), &mut dirs);
-    score_with(grid, pose, scan, &dirs, o)
+    score_with(grid, pose, scan, &dirs, o, &mut BeamCache::new(scan.beams.len()))
 }
 
 /// (score, log-likelihood, beams matched) of `pose`.
@@ -161,11 +273,22 @@ pub fn likelihood_and_score(
 ) -> (Real, Real, usize) {
     let mut dirs = Vec::with_capacity(scan.beams.len());
     directions(scan, laser_heading(pose, scan), &mut dirs);
+    likelihood_with(grid, pose, scan, &dirs, o, &mut BeamCache::new(scan.beams.len()))
+}
+
+fn likelihood_with(
+    grid: &TiledGrid,
+    pose: &Pose2,
+    scan: &PreparedScan,
+    dirs: &[Direction],
+    o: &SlamOptions,
+    cache: &mut BeamCache,
+) -> (Real, Real, usize) {
     let (mut s, mut l, mut n) = (0.0, 0.0, 0);
     let no_hit = NULL_LIKELIHOOD / o.lsigma;
-    match_beams(grid, pose, scan, &dirs, o, |d2| match d2 {
+    match_beams(grid, pose, scan, dirs, o, cache, |d2| match d2 {
         Some(d2) => {
-            s += (-d2 / o.sigma).exp();
+            s += exp_neg(d2 / o.sigma);
             l += -d2 / o.lsigma;
             n += 1;
         }
@@ -183,6 +306,9 @@ pub struct Matched {
     pub score: Real,
     /// Pose evaluations spent (the quantity the cutoff bounds).
     pub evaluations: u32,
+    /// The log-likelihood of the scan at `pose` (see
+    /// [`likelihood_and_score`]): the particle's weight update.
+    pub log_likelihood: Real,
 }
 
 /// Hill-climbs the score from `init` (GMapping's `optimize`).
@@ -191,48 +317,62 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
         Cutoff::Unbounded => u32::MAX,
         Cutoff::Evaluations(n) => n,
     };
-    let mut current = *init;
+    // Poses lie on a lattice around `init` whose unit is the finest step,
+    // so a pose reached twice is recognised exactly and scored once.
+    let finest = (1i64 << o.iterations) as Real;
+    let unit = (o.lstep / finest, o.astep / finest);
+    let pose_at = |p: Lattice| {
+        Pose2::new(
+            init.x + p.0 as Real * unit.0,
+            init.y + p.1 as Real * unit.0,
+            init.theta + p.2 as Real * unit.1,
+        )
+    };
+    let mut seen: Vec<(Lattice, Real)> = Vec::with_capacity(128);
+    let mut current: Lattice = (0, 0, 0);
     let mut current_dirs = Vec::with_capacity(scan.beams.len());
     let mut turned_dirs = Vec::with_capacity(scan.beams.len());
     let mut best_turned_dirs = Vec::with_capacity(scan.beams.len());
-    directions(scan, laser_heading(&current, scan), &mut current_dirs);
-    let mut current_score = score_with(grid, &current, scan, &current_dirs, o);
+    directions(scan, laser_heading(init, scan), &mut current_dirs);
+    let mut cache = BeamCache::new(scan.beams.len());
+    let mut current_score = score_with(grid, init, scan, &current_dirs, o, &mut cache);
+    seen.push((current, current_score));
     let mut evaluations = 1;
-    let (mut ld, mut ad) = (o.lstep, o.astep);
+    let mut step = 1i64 << o.iterations;
     let mut refinement = 0;
     let mut best_score = -1.0;
     loop {
         if best_score >= current_score {
             refinement += 1;
-            ld *= 0.5;
-            ad *= 0.5;
+            step /= 2;
         }
         best_score = current_score;
         let mut best_local = current;
         let mut best_is_turn = false;
-        for (dx, dy, dt) in [
-            (ld, 0.0, 0.0),
-            (-ld, 0.0, 0.0),
-            (0.0, -ld, 0.0),
-            (0.0, ld, 0.0),
-            (0.0, 0.0, ad),
-            (0.0, 0.0, -ad),
-        ] {
+        let moves = [(step, 0, 0), (-step, 0, 0), (0, -step, 0), (0, step, 0), (0, 0, step), (0, 0, -step)];
+        for (dx, dy, dt) in moves {
             if evaluations >= limit {
                 break;
             }
-            let candidate = Pose2::new(current.x + dx, current.y + dy, current.theta + dt);
-            let s = if dt == 0.0 {
-                score_with(grid, &candidate, scan, &current_dirs, o)
+            let at = (current.0 + dx, current.1 + dy, current.2 + dt);
+            if seen.iter().any(|&(p, _)| p == at) {
+                // Scored before and not kept then: it cannot beat the
+                // current pose, whose score only rose since.
+                continue;
+            }
+            let candidate = pose_at(at);
+            let s = if dt == 0 {
+                score_with(grid, &candidate, scan, &current_dirs, o, &mut cache)
             } else {
                 directions(scan, laser_heading(&candidate, scan), &mut turned_dirs);
-                score_with(grid, &candidate, scan, &turned_dirs, o)
+                score_with(grid, &candidate, scan, &turned_dirs, o, &mut cache)
             };
             evaluations += 1;
+            seen.push((at, s));
             if s > current_score {
                 current_score = s;
-                best_local = candidate;
-                best_is_turn = dt != 0.0;
+                best_local = at;
+                best_is_turn = dt != 0;
                 if best_is_turn {
                     std::mem::swap(&mut best_turned_dirs, &mut turned_dirs);
                 }
@@ -247,8 +387,14 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
             break;
         }
     }
-    Matched { pose: current, score: current_score, evaluations }
+    let pose = pose_at(current);
+    let (_, log_likelihood, _) = likelihood_with(grid, &pose, scan, &current_dirs, o, &mut cache);
+    Matched { pose, score: current_score, evaluations, log_likelihood }
 }
+
+/// A pose on the hill climber's lattice: (x, y, θ) in finest steps from
+/// the initial pose.
+type Lattice = (i64, i64, i64);
 
 #[cfg(test)]
 mod tests {
@@ -295,6 +441,31 @@ mod tests {
     }
 
     #[test]
+    fn the_inline_exponential_matches_libm() {
+        for i in 0..20_000 {
+            let x = i as Real * 1e-3;
+            let (got, want) = (exp_neg(x), (-x).exp());
+            assert!((got - want).abs() <= 1e-13 * want, "{x}: {got} vs {want}");
+        }
+        assert!(exp_neg(300.0) > 0.0 && exp_neg(800.0) == 0.0 && exp_neg(Real::INFINITY) == 0.0);
+    }
+
+    #[test]
+    fn the_step_back_rounds_like_gmapping() {
+        for i in 0..=3600 {
+            let a = (i as Real / 10.0).to_radians();
+            let (s, c) = a.sin_cos();
+            for v in [c, s] {
+                let want = (-v * std::f64::consts::SQRT_2).round() as i64;
+                // Away from the rounding boundary the two agree exactly.
+                if ((v * std::f64::consts::SQRT_2).abs() - 0.5).abs() > 1e-9 {
+                    assert_eq!(step_back(v), want, "{v}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn recovers_known_offsets() {
         let world = room();
         let truth = Pose2::new(3.3, 1.7, 0.4);
@@ -311,6 +482,7 @@ mod tests {
             let m = optimize(&grid, &start, &scan, &o);
             assert!(m.pose.distance(&truth) < 0.02, "from {start:?}: {:?}", m.pose);
             assert!((m.pose.theta - truth.theta).abs() < 0.01, "from {start:?}: {:?}", m.pose);
+            assert_eq!(m.log_likelihood, likelihood_and_score(&grid, &m.pose, &scan, &o).1);
         }
     }
 

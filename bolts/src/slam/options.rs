@@ -161,6 +161,9 @@ impl SlamOptions {
         if !(0.0..=1.0).contains(&self.resample_threshold) || !(0.0..1.0).contains(&self.occupied_threshold) {
             return Err("resample_threshold must be in [0, 1] and occupied_threshold in [0, 1)".into());
         }
+        if self.iterations > 30 {
+            return Err(format!("iterations must be at most 30 step halvings, got {}", self.iterations));
+        }
         if !(0..=5).contains(&self.kernel) {
             return Err(format!("kernel must be 0..=5 cells, got {}", self.kernel));
         }
@@ -184,5 +187,6 @@ mod tests {
         assert!(toml::from_str::<SlamOptions>("cutoff = \"fast\"").is_err());
         assert!(toml::from_str::<SlamOptions>("partcles = 3").unwrap_err().to_string().contains("partcles"));
         assert!(SlamOptions { kernel: 9, ..SlamOptions::default() }.check().is_err());
+        assert!(SlamOptions { iterations: 31, ..SlamOptions::default() }.check().is_err());
     }
 }
