@@ -178,7 +178,12 @@ impl BeamCache {
         let c = grid.cell_of(hit.0, hit.1);
         let (hx, hy) = (hit.0 as f32, hit.1 as f32);
         let mut best = f32::INFINITY;
-        let mut closest = |mx: f32, my: f32| best = best.min((hx - mx).powi(2) + (hy - my).powi(2));
+        let mut closest = |mx: f32, my: f32| {
+            let d2 = (hx - mx).powi(2) + (hy - my).powi(2);
+            if d2 < best {
+                best = d2;
+            }
+        };
         match (i32::try_from(c.0), i32::try_from(c.1)) {
             (Ok(x), Ok(y)) => {
                 let back8 = (back.0 as i8, back.1 as i8);
