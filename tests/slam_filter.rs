@@ -34,3 +34,44 @@ fn slam_beats_odometry_on_a_simulated_office() {
         raw.ate_rmse
     );
 }
+
+/// A run that comes back to where it has been: the relations between the
+/// first and the later visit (the loop relations) must hold in the final
+/// best trajectory, which they cannot if the loop was not closed.
+#[test]
+fn a_simulated_run_closes_its_loops() {
+    use squall::bolts::eval::relations::{parse_relations, score};
+    use squall::spouts::sim::output::relations;
+
+    let config = SimConfig { seed: 5, duration_secs: 300.0, ..SimConfig::default() };
+    let sim = Simulation::new(office(3, 3, 2), config);
+    let options = SlamOptions { particles: 15, max_urange: 30.0, ..SlamOptions::default() };
+    let mut filter = Rbpf::new(options, 11).unwrap();
+    let (mut truth, mut odometry, mut scans) = (Trajectory::default(), Trajectory::default(), Vec::new());
+    for event in sim {
+        if let SimEvent::Scan(scan, true_pose) = event {
+            filter.process(&scan);
+            truth.push(scan.stamp, true_pose);
+            odometry.push(scan.stamp, scan.odometry);
+            scans.push((scan.stamp, scan.odometry));
+        }
+    }
+    let mut slam = Trajectory::default();
+    for (stamp, pose) in filter.lineage_poses(scans) {
+        slam.push(stamp, pose);
+    }
+    let (text, local, loops) = relations(&truth);
+    let loop_lines: String = text.lines().skip(local).map(|l| format!("{l}\n")).collect();
+    let loop_relations = parse_relations("loops", &loop_lines).unwrap();
+    assert_eq!(loop_relations.len(), loops);
+    assert!(loops >= 5, "the route revisits places: {loops} loop relations");
+    let (est, raw) = (score(&slam, &loop_relations), score(&odometry, &loop_relations));
+    eprintln!("{loops} loop relations: SLAM {:.3} m, odometry {:.3} m", est.trans_mean, raw.trans_mean);
+    assert_eq!(est.matched, loops);
+    assert!(
+        est.trans_mean < 0.1 && est.trans_mean < 0.25 * raw.trans_mean,
+        "loop error: SLAM {:.3} m vs odometry {:.3} m",
+        est.trans_mean,
+        raw.trans_mean
+    );
+}

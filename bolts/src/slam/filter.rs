@@ -20,9 +20,31 @@ use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
-use crate::slam::matcher::{PreparedScan, optimize};
+use crate::slam::matcher::{Matched, PreparedScan, optimize, wide_search};
+
+/// Steps a side of the wide search's grid (7 × 7 × 7 poses).
+const WIDE_SEARCH_STEPS: i32 = 3;
+
+/// A particle's scan matching: the climb from its predicted pose and, when
+/// that matches too few beams (odometry far off, as in the Intel log), a
+/// wide search whose pose is kept if it scores clearly better.
+fn refine(map: &TiledGrid, predicted: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Matched {
+    let m = optimize(map, predicted, scan, o);
+    let weak = (m.matched_beams as Real) < o.wide_search_below * scan.len() as Real;
+    if o.cutoff != Cutoff::Unbounded || !weak {
+        return m;
+    }
+    let (reach, turn) = (o.wide_search_reach, o.wide_search_turn);
+    let wide = wide_search(map, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
+    let evaluations = m.evaluations + wide.evaluations;
+    if wide.score > m.score * o.wide_search_margin {
+        Matched { evaluations, ..wide }
+    } else {
+        Matched { evaluations, ..m }
+    }
+}
 use crate::slam::motion::sample_motion;
-use crate::slam::options::SlamOptions;
+use crate::slam::options::{Cutoff, SlamOptions};
 use crate::slam::resample::{low_variance, normalize};
 
 /// A pose a particle held at a processed reading, linked to its ancestor's.
@@ -161,7 +183,7 @@ impl Rbpf {
         let prepared = PreparedScan::new(scan, o);
         let mut report = StepReport::default();
         for p in &mut self.particles {
-            let m = optimize(&p.map, &p.pose, &prepared, o);
+            let m = refine(&p.map, &p.pose, &prepared, o);
             // A climb that matched nothing leaves the pose where it was
             // (then `m.pose` is that pose).
             p.pose = m.pose;

@@ -109,7 +109,7 @@ const EXP2_SIXTEENTHS: [Real; 16] = [
     0.805_245_165_974_627_1,
     0.771_105_412_703_970_4,
     0.738_413_072_969_749_7,
-    0.707_106_781_186_547_6,
+    std::f64::consts::FRAC_1_SQRT_2,
     0.677_127_773_468_446_3,
     0.648_419_777_325_504_8,
     0.620_928_906_036_742,
@@ -314,6 +314,8 @@ pub struct Matched {
     /// The log-likelihood of the scan at `pose` (see
     /// [`likelihood_and_score`]): the particle's weight update.
     pub log_likelihood: Real,
+    /// Beams that found a wall at `pose`.
+    pub matched_beams: usize,
 }
 
 /// Hill-climbs the score from `init` (GMapping's `optimize`).
@@ -393,8 +395,47 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
         }
     }
     let pose = pose_at(current);
-    let (_, log_likelihood, _) = likelihood_with(grid, &pose, scan, &current_dirs, o, &mut cache);
-    Matched { pose, score: current_score, evaluations, log_likelihood }
+    let (_, log_likelihood, matched_beams) = likelihood_with(grid, &pose, scan, &current_dirs, o, &mut cache);
+    Matched { pose, score: current_score, evaluations, log_likelihood, matched_beams }
+}
+
+/// A coarse search of a wide window around `init` (±`reach` metres, ±`turn`
+/// radians, in `steps` steps a side), then a climb from its best pose: for
+/// readings the climb from `init` could not match well.
+pub fn wide_search(
+    grid: &TiledGrid,
+    init: &Pose2,
+    scan: &PreparedScan,
+    o: &SlamOptions,
+    reach: Real,
+    turn: Real,
+    steps: i32,
+) -> Matched {
+    let mut cache = BeamCache::new(scan.beams.len());
+    let mut dirs = Vec::with_capacity(scan.beams.len());
+    let mut best = (Real::NEG_INFINITY, *init);
+    let mut evaluations = 0;
+    for a in -steps..=steps {
+        let theta = init.theta + turn * Real::from(a) / Real::from(steps);
+        directions(scan, laser_heading(&Pose2::new(init.x, init.y, theta), scan), &mut dirs);
+        for i in -steps..=steps {
+            for j in -steps..=steps {
+                let pose = Pose2::new(
+                    init.x + reach * Real::from(i) / Real::from(steps),
+                    init.y + reach * Real::from(j) / Real::from(steps),
+                    theta,
+                );
+                let s = score_with(grid, &pose, scan, &dirs, o, &mut cache);
+                evaluations += 1;
+                if s > best.0 {
+                    best = (s, pose);
+                }
+            }
+        }
+    }
+    let mut m = optimize(grid, &best.1, scan, o);
+    m.evaluations += evaluations;
+    m
 }
 
 /// A pose on the hill climber's lattice: (x, y, θ) in finest steps from
@@ -489,6 +530,21 @@ mod tests {
             assert!((m.pose.theta - truth.theta).abs() < 0.01, "from {start:?}: {:?}", m.pose);
             assert_eq!(m.log_likelihood, likelihood_and_score(&grid, &m.pose, &scan, &o).1);
         }
+    }
+
+    #[test]
+    fn the_wide_search_recovers_an_offset_the_climb_cannot() {
+        let world = room();
+        let truth = Pose2::new(3.3, 1.7, 0.4);
+        let grid = mapped(&world, &[truth, Pose2::new(1.0, 4.0, -1.0), Pose2::new(6.5, 1.5, 2.0)]);
+        let o = SlamOptions::default();
+        let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
+        let start = Pose2::new(3.55, 1.45, 0.52);
+        let wide = wide_search(&grid, &start, &scan, &o, 0.3, 0.15, 3);
+        assert!(wide.pose.distance(&truth) < 0.02, "{:?}", wide.pose);
+        assert!(wide.evaluations > 343, "the grid and the climb are counted: {}", wide.evaluations);
+        let climb = optimize(&grid, &start, &scan, &o);
+        assert!(climb.score < wide.score, "{} vs {}", climb.score, wide.score);
     }
 
     #[test]

@@ -96,6 +96,19 @@ pub struct SlamOptions {
     /// Pose evaluations allowed per particle per reading. The default is
     /// unbounded.
     pub cutoff: Cutoff,
+    /// When the climb matches fewer than this fraction of the beams, a
+    /// wide search looks further (squall's addition for poor odometry; 0
+    /// turns it off, as in GMapping). The default is 0.7. Off under a
+    /// cutoff, which bounds every evaluation.
+    pub wide_search_below: Real,
+    /// Half-width of the wide search in x and y, metres. The default is 0.3.
+    pub wide_search_reach: Real,
+    /// Half-width of the wide search in heading, radians. The default is
+    /// 0.15.
+    pub wide_search_turn: Real,
+    /// The wide search's pose replaces the climb's only if its score is
+    /// this many times higher. The default is 1.2.
+    pub wide_search_margin: Real,
 }
 
 impl Default for SlamOptions {
@@ -121,6 +134,10 @@ impl Default for SlamOptions {
             resample_threshold: 0.5,
             occupied_threshold: 0.1,
             cutoff: Cutoff::Unbounded,
+            wide_search_below: 0.7,
+            wide_search_reach: 0.3,
+            wide_search_turn: 0.15,
+            wide_search_margin: 1.2,
         }
     }
 }
@@ -145,6 +162,8 @@ impl SlamOptions {
             ("astep", self.astep),
             ("lsigma", self.lsigma),
             ("ogain", self.ogain),
+            ("wide_search_reach", self.wide_search_reach),
+            ("wide_search_turn", self.wide_search_turn),
         ] {
             positive(n, v)?;
         }
@@ -155,6 +174,8 @@ impl SlamOptions {
             ("stt", self.stt),
             ("linear_update", self.linear_update),
             ("angular_update", self.angular_update),
+            ("wide_search_below", self.wide_search_below),
+            ("wide_search_margin", self.wide_search_margin),
         ] {
             non_negative(n, v)?;
         }
