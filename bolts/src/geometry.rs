@@ -68,23 +68,54 @@ impl Pose2 {
 /// (Bresenham), in order from `a`.
 #[inline]
 pub fn line_cells(a: (i64, i64), b: (i64, i64), mut visit: impl FnMut((i64, i64))) {
-    let (dx, dy) = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
-    let (sx, sy) = (if a.0 < b.0 { 1 } else { -1 }, if a.1 < b.1 { 1 } else { -1 });
-    let (mut x, mut y, mut err) = (a.0, a.1, dx + dy);
-    loop {
-        visit((x, y));
-        if x == b.0 && y == b.1 {
-            return;
+    let mut line = LineStepper::new(a, b);
+    visit(a);
+    while !line.done() {
+        visit(line.step());
+    }
+}
+
+/// Bresenham's line from cell `a` to cell `b`, walked a cell at a time by
+/// the caller (for walks that act on runs of cells, such as a beam's cells
+/// tile by tile).
+#[derive(Debug, Clone)]
+pub struct LineStepper {
+    at: (i64, i64),
+    end: (i64, i64),
+    d: (i64, i64),
+    s: (i64, i64),
+    err: i64,
+}
+
+impl LineStepper {
+    /// A walk that stands at `a`.
+    #[inline]
+    pub fn new(a: (i64, i64), b: (i64, i64)) -> Self {
+        let d = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
+        let s = (if a.0 < b.0 { 1 } else { -1 }, if a.1 < b.1 { 1 } else { -1 });
+        LineStepper { at: a, end: b, d, s, err: d.0 + d.1 }
+    }
+
+    /// Whether the walk stands at `b`.
+    #[inline]
+    pub fn done(&self) -> bool {
+        self.at == self.end
+    }
+
+    /// Moves to the next cell and returns it (call only while not
+    /// [`done`](Self::done)).
+    #[inline]
+    pub fn step(&mut self) -> (i64, i64) {
+        let e2 = 2 * self.err;
+        if e2 >= self.d.1 {
+            self.err += self.d.1;
+            self.at.0 += self.s.0;
         }
-        let e2 = 2 * err;
-        if e2 >= dy {
-            err += dy;
-            x += sx;
+        if e2 <= self.d.0 {
+            self.err += self.d.0;
+            self.at.1 += self.s.1;
         }
-        if e2 <= dx {
-            err += dx;
-            y += sy;
-        }
+        self.at
     }
 }
 

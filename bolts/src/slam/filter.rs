@@ -20,31 +20,9 @@ use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
-use crate::slam::matcher::{Matched, PreparedScan, optimize, wide_search};
-
-/// Steps a side of the wide search's grid (7 × 7 × 7 poses).
-const WIDE_SEARCH_STEPS: i32 = 3;
-
-/// A particle's scan matching: the climb from its predicted pose and, when
-/// that matches too few beams (odometry far off, as in the Intel log), a
-/// wide search whose pose is kept if it scores clearly better.
-fn refine(map: &TiledGrid, predicted: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Matched {
-    let m = optimize(map, predicted, scan, o);
-    let weak = (m.matched_beams as Real) < o.wide_search_below * scan.len() as Real;
-    if o.cutoff != Cutoff::Unbounded || !weak {
-        return m;
-    }
-    let (reach, turn) = (o.wide_search_reach, o.wide_search_turn);
-    let wide = wide_search(map, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
-    let evaluations = m.evaluations + wide.evaluations;
-    if wide.score > m.score * o.wide_search_margin {
-        Matched { evaluations, ..wide }
-    } else {
-        Matched { evaluations, ..m }
-    }
-}
+use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::motion::sample_motion;
-use crate::slam::options::{Cutoff, SlamOptions};
+use crate::slam::options::SlamOptions;
 use crate::slam::resample::{low_variance, normalize};
 
 /// A pose a particle held at a processed reading, linked to its ancestor's.
@@ -98,6 +76,8 @@ pub struct Rbpf {
     last_odometry: Option<Pose2>,
     travelled: (Real, Real),
     step: u64,
+    /// Scan-matching scratch memory, reused by every particle.
+    matcher: Matcher,
 }
 
 fn rng_for(seed: u64, step: u64, slot: u64) -> ChaCha8Rng {
@@ -110,7 +90,15 @@ impl Rbpf {
     /// A filter; errors name the wrong option.
     pub fn new(options: SlamOptions, seed: u64) -> Result<Self, String> {
         options.check()?;
-        Ok(Rbpf { options, seed, particles: Vec::new(), last_odometry: None, travelled: (0.0, 0.0), step: 0 })
+        Ok(Rbpf {
+            options,
+            seed,
+            particles: Vec::new(),
+            last_odometry: None,
+            travelled: (0.0, 0.0),
+            step: 0,
+            matcher: Matcher::default(),
+        })
     }
 
     /// The particles.
@@ -183,7 +171,7 @@ impl Rbpf {
         let prepared = PreparedScan::new(scan, o);
         let mut report = StepReport::default();
         for p in &mut self.particles {
-            let m = refine(&p.map, &p.pose, &prepared, o);
+            let m = self.matcher.refine(&p.map, &p.pose, &prepared, o);
             // A climb that matched nothing leaves the pose where it was
             // (then `m.pose` is that pose).
             p.pose = m.pose;

@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use crate::geometry::Real;
+use crate::geometry::{LineStepper, Real};
 
 /// Cells per tile side is `1 << TILE_SHIFT`.
 pub const TILE_SHIFT: u32 = 5;
@@ -27,39 +27,6 @@ const GROWTH_SLACK: i64 = 2;
 fn floor(v: Real) -> i64 {
     let t = v as i64;
     if (t as Real) > v { t - 1 } else { t }
-}
-
-/// Bresenham's line from one cell to another, a cell per step (the same
-/// cells as [`crate::geometry::line_cells`]).
-#[derive(Debug)]
-struct Line {
-    at: (i64, i64),
-    d: (i64, i64),
-    s: (i64, i64),
-    err: i64,
-}
-
-impl Line {
-    fn new(a: (i64, i64), b: (i64, i64)) -> Self {
-        let d = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
-        let s = (if a.0 < b.0 { 1 } else { -1 }, if a.1 < b.1 { 1 } else { -1 });
-        Line { at: a, d, s, err: d.0 + d.1 }
-    }
-
-    /// The next cell (call only before reaching the end).
-    #[inline]
-    fn step(&mut self) -> (i64, i64) {
-        let e2 = 2 * self.err;
-        if e2 >= self.d.1 {
-            self.err += self.d.1;
-            self.at.0 += self.s.0;
-        }
-        if e2 <= self.d.0 {
-            self.err += self.d.0;
-            self.at.1 += self.s.1;
-        }
-        self.at
-    }
 }
 
 /// What one cell has seen.
@@ -308,7 +275,7 @@ impl TiledGrid {
     pub fn add_beam(&mut self, from: (i64, i64), to: (i64, i64), end: Option<(f32, f32)>) {
         self.reserve_cells((from.0.min(to.0), from.1.min(to.1)), (from.0.max(to.0), from.1.max(to.1)));
         let threshold = self.wall_threshold;
-        let mut line = Line::new(from, to);
+        let mut line = LineStepper::new(from, to);
         let mut c = from;
         loop {
             let key = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
@@ -393,8 +360,9 @@ impl TiledGrid {
     }
 
     /// [`Self::backed_walls`] for windows that cross tiles: the bits are
-    /// gathered row by row.
-    #[cold]
+    /// gathered row by row. Kept out of line so the one-tile path stays
+    /// small.
+    #[inline(never)]
     fn backed_walls_across_tiles(
         &self,
         c: (i64, i64),
@@ -507,6 +475,8 @@ impl TiledGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn cells_anywhere_grow_the_grid() {
@@ -563,23 +533,17 @@ mod tests {
         }
     }
 
-    /// A deterministic pseudo-random sequence for test data.
-    fn lcg(state: &mut u64) -> u64 {
-        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        *state >> 33
-    }
-
     #[test]
     fn kernel_search_matches_a_cell_by_cell_search() {
         let mut g = TiledGrid::new(0.1, (0.0, 0.0));
-        let mut state = 7;
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
         // Cells over four tiles around the origin: walls, free cells and
         // cells at the threshold (neither).
         for _ in 0..1500 {
-            let c = ((lcg(&mut state) % 80) as i64 - 40, (lcg(&mut state) % 80) as i64 - 40);
-            let (hits, visits) = match lcg(&mut state) % 3 {
-                0 => (1 + lcg(&mut state) as u32 % 3, 4),
-                1 => (0, 1 + lcg(&mut state) as u32 % 5),
+            let c = (rng.random_range(-40..40), rng.random_range(-40..40));
+            let (hits, visits) = match rng.random_range(0..3) {
+                0 => (rng.random_range(1..4), 4),
+                1 => (0, rng.random_range(1..6)),
                 _ => (1, 10),
             };
             let m = (c.0 as f32 * 0.1 + 0.05, c.1 as f32 * 0.1 + 0.02);
@@ -604,10 +568,7 @@ mod tests {
         };
         let mut matched = 0;
         for _ in 0..3000 {
-            let hit = (
-                (lcg(&mut state) % 9000) as Real * 1e-3 - 4.5,
-                (lcg(&mut state) % 9000) as Real * 1e-3 - 4.5,
-            );
+            let hit = (rng.random_range(-4.5..4.5), rng.random_range(-4.5..4.5));
             for back in [(-1, -1), (-1, 0), (0, 1), (1, 1), (1, -1), (0, 0)] {
                 for k in [0, 1, 2] {
                     let got = g.nearest_backed_wall(hit, back, k);
@@ -623,10 +584,10 @@ mod tests {
     fn a_beam_updates_the_cells_of_its_line_across_tiles() {
         let mut fast = TiledGrid::new(0.1, (0.0, 0.0));
         let mut slow = TiledGrid::new(0.1, (0.0, 0.0));
-        let mut state = 3;
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
         for i in 0..400 {
-            let from = ((lcg(&mut state) % 20) as i64 - 10, (lcg(&mut state) % 20) as i64 - 10);
-            let to = ((lcg(&mut state) % 200) as i64 - 100, (lcg(&mut state) % 200) as i64 - 100);
+            let from = (rng.random_range(-10..10), rng.random_range(-10..10));
+            let to = (rng.random_range(-100..100), rng.random_range(-100..100));
             let end = (i % 3 != 0).then_some((to.0 as f32 * 0.1 + 0.03, to.1 as f32 * 0.1 + 0.07));
             fast.add_beam(from, to, end);
             crate::geometry::line_cells(from, to, |c| {

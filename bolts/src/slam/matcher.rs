@@ -2,9 +2,10 @@
 //! `likelihoodAndScore`, `optimize`).
 //!
 //! For each beam, the end point is compared with the mean hit point of the
-//! nearest wall cell (the grid's wall threshold) within `kernel` cells whose
-//! neighbour one step back along the beam is free; the score adds `exp(−d²/σ)` per matched beam and
-//! the log-likelihood `−d²/lσ` (or a fixed penalty when nothing matches).
+//! nearest wall cell (the grid's wall threshold) within `kernel` cells
+//! whose neighbour one step back along the beam is free; the score adds
+//! `exp(−d²/σ)` per matched beam and the log-likelihood `−d²/lσ` (or a
+//! fixed penalty when nothing matches).
 //! `optimize` climbs the score from an initial pose with moves of ±lstep in
 //! x and y and ±astep in θ, halving the steps when no move improves,
 //! `iterations` times; a [`Cutoff`] bounds the pose evaluations.
@@ -12,10 +13,13 @@
 //! Two deliberate changes. Poses are kept on a lattice of the finest step,
 //! and a pose the climb has scored before is not scored again (it was not
 //! better then, and the current score has only risen since), which saves
-//! evaluations without changing the path. And GMapping locates the "free" cell with
-//! `world2map(pfree − phit)` where `pfree` lies δ²√2 before the hit, which
-//! only works through the map's offset; here it is the cell one step back
-//! along the beam, as intended.
+//! evaluations without changing the path. And GMapping locates the "free"
+//! cell with `world2map(pfree − phit)` where `pfree` lies δ²√2 before the
+//! hit, which only works through the map's offset; here it is the cell one
+//! step back along the beam, as intended.
+//!
+//! One addition, [`Matcher::refine`]: when the climb matches too few beams
+//! (odometry far off), a wide coarse search looks further.
 
 use crate::geometry::{Pose2, Real};
 use crate::sensor::LaserReading;
@@ -144,6 +148,9 @@ fn exp_neg(x: Real) -> Real {
 #[derive(Debug)]
 struct BeamCache {
     slots: Vec<Slot>,
+    /// Slots of other generations are empty: forgetting a map is a counter
+    /// increment, not a pass over the table.
+    generation: u32,
     means: Vec<(f32, f32)>,
     /// The per-beam exponents d²/σ of the pose being scored.
     exponents: Vec<Real>,
@@ -152,24 +159,38 @@ struct BeamCache {
 /// One remembered (cell, step back) and where its candidates are.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Slot {
+    generation: u32,
     cell: (i32, i32),
     back: (i8, i8),
     start: u32,
     end: u32,
 }
 
-const EMPTY_SLOT: Slot = Slot { cell: (i32::MIN, i32::MIN), back: (0, 0), start: 0, end: 0 };
+const EMPTY_SLOT: Slot = Slot { generation: 0, cell: (0, 0), back: (0, 0), start: 0, end: 0 };
 /// Table slots (a power of two).
 const CACHE_SLOTS: usize = 1 << 12;
 /// Candidates kept before the cache starts over (bounds its memory).
 const CACHE_CAPACITY: usize = 1 << 16;
 
-impl BeamCache {
-    fn new(beams: usize) -> Self {
+impl Default for BeamCache {
+    fn default() -> Self {
         BeamCache {
             slots: vec![EMPTY_SLOT; CACHE_SLOTS],
-            means: Vec::with_capacity(4096),
-            exponents: Vec::with_capacity(beams),
+            generation: 1,
+            means: Vec::new(),
+            exponents: Vec::new(),
+        }
+    }
+}
+
+impl BeamCache {
+    /// Empties the cache (before matching against another map).
+    fn forget(&mut self) {
+        self.means.clear();
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            self.slots.fill(EMPTY_SLOT);
+            self.generation = 1;
         }
     }
 
@@ -192,17 +213,19 @@ impl BeamCache {
                     ^ ((back.0 + 3 * back.1 + 4) as u32).wrapping_mul(0xc2b2_ae3d);
                 let index = (hash >> (32 - CACHE_SLOTS.trailing_zeros())) as usize;
                 let slot = self.slots[index];
-                let slot = if slot.cell == (x, y) && slot.back == back8 {
+                let slot = if slot.generation == self.generation && slot.cell == (x, y) && slot.back == back8
+                {
                     slot
                 } else {
                     if self.means.len() > CACHE_CAPACITY {
-                        self.means.clear();
-                        self.slots.fill(EMPTY_SLOT);
+                        self.forget();
                     }
                     let start = self.means.len() as u32;
                     let means = &mut self.means;
                     grid.backed_walls(c, back, k, |mx, my| means.push((mx, my)));
-                    let fresh = Slot { cell: (x, y), back: back8, start, end: self.means.len() as u32 };
+                    let generation = self.generation;
+                    let fresh =
+                        Slot { generation, cell: (x, y), back: back8, start, end: self.means.len() as u32 };
                     self.slots[index] = fresh;
                     fresh
                 };
@@ -266,7 +289,7 @@ fn score_with(
 pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
     let mut dirs = Vec::with_capacity(scan.beams.len());
     directions(scan, laser_heading(pose, scan), &mut dirs);
-    score_with(grid, pose, scan, &dirs, o, &mut BeamCache::new(scan.beams.len()))
+    score_with(grid, pose, scan, &dirs, o, &mut BeamCache::default())
 }
 
 /// (score, log-likelihood, beams matched) of `pose`.
@@ -278,7 +301,7 @@ pub fn likelihood_and_score(
 ) -> (Real, Real, usize) {
     let mut dirs = Vec::with_capacity(scan.beams.len());
     directions(scan, laser_heading(pose, scan), &mut dirs);
-    likelihood_with(grid, pose, scan, &dirs, o, &mut BeamCache::new(scan.beams.len()))
+    likelihood_with(grid, pose, scan, &dirs, o, &mut BeamCache::default())
 }
 
 fn likelihood_with(
@@ -291,9 +314,10 @@ fn likelihood_with(
 ) -> (Real, Real, usize) {
     let (mut s, mut l, mut n) = (0.0, 0.0, 0);
     let no_hit = NULL_LIKELIHOOD / o.lsigma;
+    let per_sigma = 1.0 / o.sigma;
     match_beams(grid, pose, scan, dirs, o, cache, |d2| match d2 {
         Some(d2) => {
-            s += exp_neg(d2 / o.sigma);
+            s += exp_neg(d2 * per_sigma);
             l += -d2 / o.lsigma;
             n += 1;
         }
@@ -318,124 +342,187 @@ pub struct Matched {
     pub matched_beams: usize,
 }
 
-/// Hill-climbs the score from `init` (GMapping's `optimize`).
+/// Hill-climbs the score from `init` (GMapping's `optimize`), with scratch
+/// memory of its own; a filter keeps a [`Matcher`] instead.
 pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Matched {
-    let limit = match o.cutoff {
-        Cutoff::Unbounded => u32::MAX,
-        Cutoff::Evaluations(n) => n,
-    };
-    // Poses lie on a lattice around `init` whose unit is the finest step,
-    // so a pose reached twice is recognised exactly and scored once.
-    let finest = (1i64 << o.iterations) as Real;
-    let unit = (o.lstep / finest, o.astep / finest);
-    let pose_at = |p: Lattice| {
-        Pose2::new(
-            init.x + p.0 as Real * unit.0,
-            init.y + p.1 as Real * unit.0,
-            init.theta + p.2 as Real * unit.1,
-        )
-    };
-    let mut seen: Vec<(Lattice, Real)> = Vec::with_capacity(128);
-    let mut current: Lattice = (0, 0, 0);
-    let mut current_dirs = Vec::with_capacity(scan.beams.len());
-    let mut turned_dirs = Vec::with_capacity(scan.beams.len());
-    let mut best_turned_dirs = Vec::with_capacity(scan.beams.len());
-    directions(scan, laser_heading(init, scan), &mut current_dirs);
-    let mut cache = BeamCache::new(scan.beams.len());
-    let mut current_score = score_with(grid, init, scan, &current_dirs, o, &mut cache);
-    seen.push((current, current_score));
-    let mut evaluations = 1;
-    let mut step = 1i64 << o.iterations;
-    let mut refinement = 0;
-    let mut best_score = -1.0;
-    loop {
-        if best_score >= current_score {
-            refinement += 1;
-            step /= 2;
-        }
-        best_score = current_score;
-        let mut best_local = current;
-        let mut best_is_turn = false;
-        let moves = [(step, 0, 0), (-step, 0, 0), (0, -step, 0), (0, step, 0), (0, 0, step), (0, 0, -step)];
-        for (dx, dy, dt) in moves {
-            if evaluations >= limit {
-                break;
-            }
-            let at = (current.0 + dx, current.1 + dy, current.2 + dt);
-            if seen.iter().any(|&(p, _)| p == at) {
-                // Scored before and not kept then: it cannot beat the
-                // current pose, whose score only rose since.
-                continue;
-            }
-            let candidate = pose_at(at);
-            let s = if dt == 0 {
-                score_with(grid, &candidate, scan, &current_dirs, o, &mut cache)
-            } else {
-                directions(scan, laser_heading(&candidate, scan), &mut turned_dirs);
-                score_with(grid, &candidate, scan, &turned_dirs, o, &mut cache)
-            };
-            evaluations += 1;
-            seen.push((at, s));
-            if s > current_score {
-                current_score = s;
-                best_local = at;
-                best_is_turn = dt != 0;
-                if best_is_turn {
-                    std::mem::swap(&mut best_turned_dirs, &mut turned_dirs);
-                }
-            }
-        }
-        if best_is_turn {
-            std::mem::swap(&mut current_dirs, &mut best_turned_dirs);
-        }
-        current = best_local;
-        let improving = current_score > best_score;
-        if evaluations >= limit || !(improving || refinement < o.iterations) {
-            break;
-        }
-    }
-    let pose = pose_at(current);
-    let (_, log_likelihood, matched_beams) = likelihood_with(grid, &pose, scan, &current_dirs, o, &mut cache);
-    Matched { pose, score: current_score, evaluations, log_likelihood, matched_beams }
+    Matcher::default().optimize(grid, init, scan, o)
 }
 
-/// A coarse search of a wide window around `init` (±`reach` metres, ±`turn`
-/// radians, in `steps` steps a side), then a climb from its best pose: for
-/// readings the climb from `init` could not match well.
-pub fn wide_search(
-    grid: &TiledGrid,
-    init: &Pose2,
-    scan: &PreparedScan,
-    o: &SlamOptions,
-    reach: Real,
-    turn: Real,
-    steps: i32,
-) -> Matched {
-    let mut cache = BeamCache::new(scan.beams.len());
-    let mut dirs = Vec::with_capacity(scan.beams.len());
-    let mut best = (Real::NEG_INFINITY, *init);
-    let mut evaluations = 0;
-    for a in -steps..=steps {
-        let theta = init.theta + turn * Real::from(a) / Real::from(steps);
-        directions(scan, laser_heading(&Pose2::new(init.x, init.y, theta), scan), &mut dirs);
-        for i in -steps..=steps {
-            for j in -steps..=steps {
-                let pose = Pose2::new(
-                    init.x + reach * Real::from(i) / Real::from(steps),
-                    init.y + reach * Real::from(j) / Real::from(steps),
-                    theta,
-                );
-                let s = score_with(grid, &pose, scan, &dirs, o, &mut cache);
-                evaluations += 1;
-                if s > best.0 {
-                    best = (s, pose);
+/// Steps a side of the wide search's grid (7 × 7 × 7 poses).
+const WIDE_SEARCH_STEPS: i32 = 3;
+
+/// The scan matcher's scratch memory (candidate cache, beam directions,
+/// poses scored), kept from particle to particle and reading to reading so
+/// that matching allocates nothing once warm.
+#[derive(Debug, Default)]
+pub struct Matcher {
+    cache: BeamCache,
+    current_dirs: Vec<Direction>,
+    turned_dirs: Vec<Direction>,
+    best_turned_dirs: Vec<Direction>,
+    seen: Vec<Lattice>,
+}
+
+impl Matcher {
+    /// A particle's scan matching: the climb from its predicted pose and,
+    /// when that matches fewer than `wide_search_below` of the beams
+    /// (odometry far off, as in the Intel log) and no cutoff bounds the
+    /// work, a wide search whose pose is kept if it scores
+    /// `wide_search_margin` times higher. Evaluations of both are counted.
+    pub fn refine(
+        &mut self,
+        grid: &TiledGrid,
+        predicted: &Pose2,
+        scan: &PreparedScan,
+        o: &SlamOptions,
+    ) -> Matched {
+        let m = self.optimize(grid, predicted, scan, o);
+        let weak = (m.matched_beams as Real) < o.wide_search_below * scan.len() as Real;
+        if o.cutoff != Cutoff::Unbounded || !weak {
+            return m;
+        }
+        let (reach, turn) = (o.wide_search_reach, o.wide_search_turn);
+        let wide = self.wide_search(grid, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
+        let evaluations = m.evaluations + wide.evaluations;
+        if wide.score > m.score * o.wide_search_margin {
+            Matched { evaluations, ..wide }
+        } else {
+            Matched { evaluations, ..m }
+        }
+    }
+
+    /// Hill-climbs the score from `init` (GMapping's `optimize`).
+    pub fn optimize(
+        &mut self,
+        grid: &TiledGrid,
+        init: &Pose2,
+        scan: &PreparedScan,
+        o: &SlamOptions,
+    ) -> Matched {
+        self.cache.forget();
+        self.climb(grid, init, scan, o)
+    }
+
+    /// A coarse search of a wide window around `init` (±`reach` metres,
+    /// ±`turn` radians, in `steps` steps a side), then a climb from its best
+    /// pose: for readings the climb from `init` could not match well.
+    #[allow(clippy::too_many_arguments)]
+    pub fn wide_search(
+        &mut self,
+        grid: &TiledGrid,
+        init: &Pose2,
+        scan: &PreparedScan,
+        o: &SlamOptions,
+        reach: Real,
+        turn: Real,
+        steps: i32,
+    ) -> Matched {
+        self.cache.forget();
+        let mut best = (Real::NEG_INFINITY, *init);
+        let mut evaluations = 0;
+        for a in -steps..=steps {
+            let theta = init.theta + turn * Real::from(a) / Real::from(steps);
+            directions(scan, laser_heading(&Pose2::new(init.x, init.y, theta), scan), &mut self.turned_dirs);
+            for i in -steps..=steps {
+                for j in -steps..=steps {
+                    let pose = Pose2::new(
+                        init.x + reach * Real::from(i) / Real::from(steps),
+                        init.y + reach * Real::from(j) / Real::from(steps),
+                        theta,
+                    );
+                    let s = score_with(grid, &pose, scan, &self.turned_dirs, o, &mut self.cache);
+                    evaluations += 1;
+                    if s > best.0 {
+                        best = (s, pose);
+                    }
                 }
             }
         }
+        // The climb reads the same map: the candidates cached so far stay.
+        let mut m = self.climb(grid, &best.1, scan, o);
+        m.evaluations += evaluations;
+        m
     }
-    let mut m = optimize(grid, &best.1, scan, o);
-    m.evaluations += evaluations;
-    m
+
+    /// The hill climb on `grid` with whatever the cache holds for it.
+    fn climb(&mut self, grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Matched {
+        let limit = match o.cutoff {
+            Cutoff::Unbounded => u32::MAX,
+            Cutoff::Evaluations(n) => n,
+        };
+        // Poses lie on a lattice around `init` whose unit is the finest
+        // step, so a pose reached twice is recognised exactly and scored
+        // once.
+        let finest = (1i64 << o.iterations) as Real;
+        let unit = (o.lstep / finest, o.astep / finest);
+        let pose_at = |p: Lattice| {
+            Pose2::new(
+                init.x + p.0 as Real * unit.0,
+                init.y + p.1 as Real * unit.0,
+                init.theta + p.2 as Real * unit.1,
+            )
+        };
+        let Matcher { cache, current_dirs, turned_dirs, best_turned_dirs, seen } = self;
+        seen.clear();
+        let mut current: Lattice = (0, 0, 0);
+        directions(scan, laser_heading(init, scan), current_dirs);
+        let mut current_score = score_with(grid, init, scan, current_dirs, o, cache);
+        seen.push(current);
+        let mut evaluations = 1;
+        let mut step = 1i64 << o.iterations;
+        let mut refinement = 0;
+        let mut best_score = -1.0;
+        loop {
+            if best_score >= current_score {
+                refinement += 1;
+                step /= 2;
+            }
+            best_score = current_score;
+            let mut best_local = current;
+            let mut best_is_turn = false;
+            let moves =
+                [(step, 0, 0), (-step, 0, 0), (0, -step, 0), (0, step, 0), (0, 0, step), (0, 0, -step)];
+            for (dx, dy, dt) in moves {
+                if evaluations >= limit {
+                    break;
+                }
+                let at = (current.0 + dx, current.1 + dy, current.2 + dt);
+                if seen.contains(&at) {
+                    // Scored before and not kept then: it cannot beat the
+                    // current pose, whose score only rose since.
+                    continue;
+                }
+                let candidate = pose_at(at);
+                let s = if dt == 0 {
+                    score_with(grid, &candidate, scan, current_dirs, o, cache)
+                } else {
+                    directions(scan, laser_heading(&candidate, scan), turned_dirs);
+                    score_with(grid, &candidate, scan, turned_dirs, o, cache)
+                };
+                evaluations += 1;
+                seen.push(at);
+                if s > current_score {
+                    current_score = s;
+                    best_local = at;
+                    best_is_turn = dt != 0;
+                    if best_is_turn {
+                        std::mem::swap(best_turned_dirs, turned_dirs);
+                    }
+                }
+            }
+            if best_is_turn {
+                std::mem::swap(current_dirs, best_turned_dirs);
+            }
+            current = best_local;
+            let improving = current_score > best_score;
+            if evaluations >= limit || !(improving || refinement < o.iterations) {
+                break;
+            }
+        }
+        let pose = pose_at(current);
+        let (_, log_likelihood, matched_beams) = likelihood_with(grid, &pose, scan, current_dirs, o, cache);
+        Matched { pose, score: current_score, evaluations, log_likelihood, matched_beams }
+    }
 }
 
 /// A pose on the hill climber's lattice: (x, y, θ) in finest steps from
@@ -478,6 +565,17 @@ mod tests {
         .unwrap()
     }
 
+    /// The room mapped from three poses, the true pose of the scan to
+    /// match, default options and that scan.
+    fn scene() -> (TiledGrid, Pose2, SlamOptions, PreparedScan) {
+        let world = room();
+        let truth = Pose2::new(3.3, 1.7, 0.4);
+        let grid = mapped(&world, &[truth, Pose2::new(1.0, 4.0, -1.0), Pose2::new(6.5, 1.5, 2.0)]);
+        let o = SlamOptions::default();
+        let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
+        (grid, truth, o, scan)
+    }
+
     fn mapped(world: &LineMap, poses: &[Pose2]) -> TiledGrid {
         let mut g = TiledGrid::new(0.05, (0.0, 0.0));
         for p in poses {
@@ -513,17 +611,11 @@ mod tests {
 
     #[test]
     fn recovers_known_offsets() {
-        let world = room();
-        let truth = Pose2::new(3.3, 1.7, 0.4);
-        let grid = mapped(&world, &[truth, Pose2::new(1.0, 4.0, -1.0), Pose2::new(6.5, 1.5, 2.0)]);
-        let o = SlamOptions::default();
-        let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
-        let mut state = 12345u64;
+        use rand::{RngExt, SeedableRng};
+        let (grid, truth, o, scan) = scene();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12345);
         for _ in 0..20 {
-            let mut r = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 33) as f64 / (1u64 << 31) as f64) - 0.5
-            };
+            let mut r = || rng.random::<f64>() - 0.5;
             let start = Pose2::new(truth.x + 0.2 * r(), truth.y + 0.2 * r(), truth.theta + 0.1 * r());
             let m = optimize(&grid, &start, &scan, &o);
             assert!(m.pose.distance(&truth) < 0.02, "from {start:?}: {:?}", m.pose);
@@ -534,17 +626,28 @@ mod tests {
 
     #[test]
     fn the_wide_search_recovers_an_offset_the_climb_cannot() {
-        let world = room();
-        let truth = Pose2::new(3.3, 1.7, 0.4);
-        let grid = mapped(&world, &[truth, Pose2::new(1.0, 4.0, -1.0), Pose2::new(6.5, 1.5, 2.0)]);
-        let o = SlamOptions::default();
-        let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
+        let (grid, truth, o, scan) = scene();
         let start = Pose2::new(3.55, 1.45, 0.52);
-        let wide = wide_search(&grid, &start, &scan, &o, 0.3, 0.15, 3);
+        let wide = Matcher::default().wide_search(&grid, &start, &scan, &o, 0.3, 0.15, 3);
         assert!(wide.pose.distance(&truth) < 0.02, "{:?}", wide.pose);
         assert!(wide.evaluations > 343, "the grid and the climb are counted: {}", wide.evaluations);
         let climb = optimize(&grid, &start, &scan, &o);
         assert!(climb.score < wide.score, "{} vs {}", climb.score, wide.score);
+    }
+
+    #[test]
+    fn a_reused_matcher_forgets_the_previous_map() {
+        let (grid, truth, o, scan) = scene();
+        // Another map: the same room seen from a pose 0.3 m off, so its
+        // walls (and cached candidates) lie elsewhere.
+        let shifted = mapped(&room(), &[Pose2::new(3.0, 1.7, 0.4)]);
+        let mut reused = Matcher::default();
+        let on_grid = reused.optimize(&grid, &truth, &scan, &o);
+        let start = Pose2::new(3.35, 1.65, 0.42);
+        let again = reused.optimize(&shifted, &start, &scan, &o);
+        assert_eq!(again, optimize(&shifted, &start, &scan, &o), "as if fresh");
+        assert_ne!(again.pose, on_grid.pose);
+        assert_eq!(reused.optimize(&grid, &truth, &scan, &o), on_grid);
     }
 
     #[test]
