@@ -436,12 +436,23 @@ fn slam_on_the_simulator_and_its_argument_checks() {
         "10",
         "--cutoff",
         "140",
+        "--set",
+        "matcher.params.map_interval=3",
         "--out",
         dir.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let poses = std::fs::read_to_string(dir.join("trajectory.tum")).unwrap();
     assert_eq!(poses.lines().filter(|l| !l.starts_with('#')).count(), 400);
+    // The map sink gets the 400 trajectory poses, a map every third
+    // processed scan and the final map.
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let component =
+        |name: &str| m["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
+    let processed = component("matcher")["custom"]["processed_scans"].as_u64().unwrap();
+    assert!(processed > 6, "{processed} processed scans");
+    assert_eq!(component("map")["received"].as_u64().unwrap(), 400 + processed / 3 + 1);
     let out = squall(&["slam", "--matchers", "2", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("--matchers 2: only 1 for now"), "{}", text(&out.stderr));

@@ -75,9 +75,12 @@ impl Bolt for SlamBolt {
         let scan = input.get::<LaserReading>().ok_or("slam.rbpf takes LaserReading")?;
         let filter = self.filter.as_mut().ok_or("slam.rbpf was not prepared")?;
         let started = Instant::now();
-        if let Some(report) = filter.process(scan) {
+        let report = filter.process(scan);
+        let elapsed = started.elapsed();
+        let pose = filter.estimate(&scan.odometry).ok_or("no particles")?;
+        if let Some(report) = &report {
             self.processed += 1;
-            out.record("processed_scan_us", started.elapsed().as_micros() as u64);
+            out.record("processed_scan_us", elapsed.as_micros() as u64);
             for e in &report.evaluations {
                 out.record("evaluations_per_particle", u64::from(*e));
             }
@@ -85,10 +88,11 @@ impl Bolt for SlamBolt {
             out.count("resamplings", u64::from(report.resampled));
             out.count("tiles_cloned", report.tiles_cloned);
         }
-        let pose = filter.estimate(&scan.odometry).ok_or("no particles")?;
         self.scans.push((scan.stamp, scan.odometry));
         out.emit("pose", PoseStamped { stamp: scan.stamp, pose }).await?;
-        if self.map_interval > 0 && self.processed > 0 && self.processed % self.map_interval == 0 {
+        // Once per `map_interval` processed scans, at the scan that made the
+        // count.
+        if report.is_some() && self.map_interval > 0 && self.processed % self.map_interval == 0 {
             if let Some(map) = self.best_map() {
                 out.emit("map", map).await?;
             }
