@@ -24,6 +24,7 @@ use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::motion::sample_motion;
 use crate::slam::options::SlamOptions;
 use crate::slam::resample::{low_variance, normalize};
+use crate::slam::trajectory::{self, NoiseWeights};
 
 /// A pose a particle held at a processed reading, linked to its ancestor's.
 #[derive(Debug)]
@@ -130,22 +131,15 @@ impl Rbpf {
         out
     }
 
-    /// A pose for each of `scans` (stamp, odometry), in order: the final
-    /// best particle's pose at the last processed reading at or before the
-    /// stamp, composed with the odometry since then. This is how GMapping
-    /// results are scored (and what `trajectory.tum` holds).
+    /// A pose for each of `scans` (stamp, odometry), in order, from the
+    /// final best particle's lineage, filled in between processed scans as
+    /// `between_scans` says (see [`trajectory::fill`]). This is what
+    /// `trajectory.tum` holds and what results are scored on.
     pub fn lineage_poses(&self, scans: impl IntoIterator<Item = (f64, Pose2)>) -> Vec<(f64, Pose2)> {
-        let lineage = self.best_trajectory();
-        let mut out = Vec::new();
-        let mut k = 0;
-        for (stamp, odometry) in scans {
-            while k + 1 < lineage.len() && lineage[k + 1].0 <= stamp {
-                k += 1;
-            }
-            let Some(&(_, pose, at)) = lineage.get(k) else { break };
-            out.push((stamp, pose.compose(&odometry.relative_to(&at))));
-        }
-        out
+        let scans: Vec<(f64, Pose2)> = scans.into_iter().collect();
+        let o = &self.options;
+        let noise = NoiseWeights { per_metre: o.srr, per_radian: o.str };
+        trajectory::fill(&self.best_trajectory(), &scans, o.between_scans, noise)
     }
 
     /// Feeds one reading; `Some` when it was processed.

@@ -11,6 +11,7 @@ pub mod matcher;
 pub mod motion;
 pub mod options;
 pub mod resample;
+pub mod trajectory;
 
 /// Registers `slam.rbpf`.
 pub fn register(r: &mut squall_topology::Registry) {

@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::Real;
+pub use crate::slam::trajectory::BetweenScans;
 
 /// A limit on pose evaluations per particle per reading (seed 003's
 /// scan-matching cutoff). In files: `"none"` or a number.
@@ -109,6 +110,11 @@ pub struct SlamOptions {
     /// The wide search's pose replaces the climb's only if its score is
     /// this many times higher. The default is 1.2.
     pub wide_search_margin: Real,
+    /// How `trajectory.tum` fills in poses between processed scans:
+    /// `"interpolate"` spreads each correction back over the scans before
+    /// it, `"odometry"` composes the last corrected pose with odometry (as
+    /// GMapping reports). The default is `"interpolate"`.
+    pub between_scans: BetweenScans,
 }
 
 impl Default for SlamOptions {
@@ -138,6 +144,7 @@ impl Default for SlamOptions {
             wide_search_reach: 0.3,
             wide_search_turn: 0.15,
             wide_search_margin: 1.2,
+            between_scans: BetweenScans::Interpolate,
         }
     }
 }
@@ -203,8 +210,9 @@ mod tests {
     fn cutoff_reads_none_or_a_number() {
         let o: SlamOptions = toml::from_str("cutoff = 140\nparticles = 20").unwrap();
         assert_eq!((o.cutoff, o.particles, o.delta), (Cutoff::Evaluations(140), 20, 0.05));
-        let o: SlamOptions = toml::from_str("cutoff = \"none\"").unwrap();
-        assert_eq!(o.cutoff, Cutoff::Unbounded);
+        let o: SlamOptions = toml::from_str("cutoff = \"none\"\nbetween_scans = \"odometry\"").unwrap();
+        assert_eq!((o.cutoff, o.between_scans), (Cutoff::Unbounded, BetweenScans::Odometry));
+        assert!(toml::from_str::<SlamOptions>("between_scans = \"spline\"").is_err());
         assert!(toml::from_str::<SlamOptions>("cutoff = \"fast\"").is_err());
         assert!(toml::from_str::<SlamOptions>("partcles = 3").unwrap_err().to_string().contains("partcles"));
         assert!(SlamOptions { kernel: 9, ..SlamOptions::default() }.check().is_err());
