@@ -8,6 +8,7 @@ pub mod eval;
 pub mod geometry;
 pub mod linemap;
 pub mod map;
+pub mod pf;
 pub mod sensor;
 pub mod sinks;
 pub mod slam;

@@ -14,7 +14,6 @@ use crate::geometry::Pose2;
 use crate::map::OccupancyGrid;
 use crate::sensor::{LaserReading, PoseStamped};
 use crate::slam::filter::Rbpf;
-use crate::slam::grid::TiledGrid;
 use crate::slam::options::SlamOptions;
 
 /// The SLAM bolt.
@@ -86,7 +85,7 @@ impl Bolt for SlamBolt {
             }
             out.record("neff_x100", (report.neff * 100.0) as u64);
             out.count("resamplings", u64::from(report.resampled));
-            out.count("tiles_cloned", report.tiles_cloned);
+            out.count("tiles_cloned", report.update_work);
         }
         self.scans.push((scan.stamp, scan.odometry));
         out.emit("pose", PoseStamped { stamp: scan.stamp, pose }).await?;
@@ -102,7 +101,7 @@ impl Bolt for SlamBolt {
 
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         let Some(filter) = &self.filter else { return Ok(()) };
-        let (_, bytes) = TiledGrid::distinct_tiles(filter.particles().iter().map(|p| &p.map));
+        let (_, bytes) = filter.map_memory();
         out.count("map_bytes", bytes as u64);
         out.count("processed_scans", self.processed);
         for (stamp, pose) in filter.lineage_poses(self.scans.iter().copied()) {

@@ -8,9 +8,9 @@ pub mod filter;
 pub mod grid;
 pub mod integrate;
 pub mod matcher;
+pub mod model;
 pub mod motion;
 pub mod options;
-pub mod resample;
 pub mod trajectory;
 
 /// Registers `slam.rbpf`.

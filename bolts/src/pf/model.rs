@@ -1,0 +1,88 @@
+//! What a particle filter needs from its model; everything else (sharding
+//! the particles over tasks, weights, resampling, reassignment, the best
+//! particle's lineage) is written once in this module's siblings.
+
+use rand_chacha::ChaCha8Rng;
+
+use crate::geometry::{Pose2, Real};
+
+/// The model-specific parts of a particle filter.
+///
+/// A reading either only moves the particles (predict) or, when the model's
+/// gate says so, also corrects them (refine and weigh), after which the set
+/// may be resampled and every particle updated with the reading (a map
+/// update, for SLAM). Every method is deterministic given its arguments, so
+/// that a particle evolves identically on whichever task holds it.
+pub trait ParticleModel: Send + Sync + 'static {
+    /// A reading as the source streams it.
+    type Input: Send + Sync + 'static;
+    /// What prediction consumes between two readings (for SLAM: the two
+    /// odometry poses and the stamp).
+    type Control: Clone + Send + Sync + 'static;
+    /// One particle's state.
+    type State: Clone + Send + Sync + 'static;
+    /// Scratch memory reused from particle to particle on one task.
+    type Scratch: Default + Send;
+    /// What the gate remembers between readings.
+    type Gate: Default + Send;
+
+    /// Particles in the set.
+    fn particles(&self) -> usize;
+
+    /// Every particle's state at the first reading.
+    fn start(&self, first: &Self::Input) -> Self::State;
+
+    /// The reading's stamp and odometry pose (the lineage's marks, from
+    /// which every reading's pose is filled in).
+    fn mark(&self, input: &Self::Input) -> (f64, Pose2);
+
+    /// The control from `previous` to `input`.
+    fn control(&self, previous: &Self::Input, input: &Self::Input) -> Self::Control;
+
+    /// Whether `input`, reached by `control`, corrects the particles.
+    fn gate(&self, gate: &mut Self::Gate, control: &Self::Control) -> bool;
+
+    /// Moves a particle by a control, drawing noise from `rng`.
+    fn predict(&self, state: &mut Self::State, control: &Self::Control, rng: &mut ChaCha8Rng);
+
+    /// Prepares a correcting reading once per task before its particles
+    /// are corrected (for SLAM: the usable beams and their directions).
+    fn prepare(&self, input: &Self::Input, scratch: &mut Self::Scratch) {
+        let _ = (input, scratch);
+    }
+
+    /// Refines a particle against a correcting reading; returns its
+    /// log-likelihood and the work spent.
+    fn correct(
+        &self,
+        state: &mut Self::State,
+        input: &Self::Input,
+        scratch: &mut Self::Scratch,
+    ) -> Correction;
+
+    /// Adds a correcting reading to a particle after resampling; returns
+    /// the work counted (for SLAM: map tiles cloned).
+    fn update(&self, state: &mut Self::State, input: &Self::Input) -> u64;
+
+    /// The particle's pose, for outputs and the lineage.
+    fn pose(&self, state: &Self::State) -> Pose2;
+
+    /// Bytes that move when the state is sent to another task.
+    fn state_bytes(&self, state: &Self::State) -> u64;
+
+    /// Smoothing of the weights: log-weights are divided by this × N
+    /// before exponentiating (GMapping's ogain).
+    fn weight_smoothing(&self) -> Real;
+
+    /// Resample when Neff falls below this fraction of the particles.
+    fn resample_threshold(&self) -> Real;
+}
+
+/// One particle's correction.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Correction {
+    /// Log-likelihood of the reading at the refined state.
+    pub log_likelihood: Real,
+    /// Work spent (for SLAM: pose evaluations).
+    pub evaluations: u32,
+}

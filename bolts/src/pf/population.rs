@@ -1,0 +1,178 @@
+//! The resampler's view of the particle set: accumulated log-weights,
+//! Neff, selective resampling and the lineage tree from which the best
+//! trajectory is read. It never sees a particle's state, only what the
+//! matchers report: a pose and a log-likelihood per slot.
+
+use std::sync::Arc;
+
+use rand::RngExt;
+
+use crate::geometry::{Pose2, Real};
+use crate::pf::resample::{low_variance, normalize};
+use crate::pf::rng_for;
+
+/// A pose a particle held at a correcting reading, linked to its
+/// ancestor's.
+#[derive(Debug)]
+pub struct Node {
+    /// Reading stamp, seconds.
+    pub stamp: f64,
+    /// The particle's pose then.
+    pub pose: Pose2,
+    /// The odometry pose of that reading.
+    pub odometry: Pose2,
+    /// The ancestor's node.
+    pub parent: Option<Arc<Node>>,
+}
+
+/// What the resampler decided for one correcting reading.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    /// Neff before resampling.
+    pub neff: Real,
+    /// New slot j descends from old slot `parents[j]` (the identity when
+    /// the set was not resampled).
+    pub parents: Vec<usize>,
+    /// Whether the set was resampled.
+    pub resampled: bool,
+    /// The slot of the best particle (highest lineage weight) after the
+    /// decision.
+    pub best: usize,
+}
+
+/// Weights and lineage of every particle slot.
+#[derive(Debug, Clone)]
+pub struct Population {
+    seed: u64,
+    /// Log-likelihood accumulated since the last resampling.
+    log_weights: Vec<Real>,
+    /// Log-likelihood accumulated over the whole lineage (never reset):
+    /// what "best particle" means, as in GMapping's `weightSum`.
+    lineage_weights: Vec<Real>,
+    nodes: Vec<Arc<Node>>,
+}
+
+impl Population {
+    /// `particles` slots, all at `pose` at the first reading.
+    pub fn start(particles: usize, seed: u64, stamp: f64, pose: Pose2, odometry: Pose2) -> Self {
+        let node = Arc::new(Node { stamp, pose, odometry, parent: None });
+        Population {
+            seed,
+            log_weights: vec![0.0; particles],
+            lineage_weights: vec![0.0; particles],
+            nodes: vec![node; particles],
+        }
+    }
+
+    /// Particles in the set.
+    pub fn len(&self) -> usize {
+        self.log_weights.len()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.log_weights.is_empty()
+    }
+
+    /// Takes the corrected reading `step` (its stamp and odometry) with
+    /// each slot's refined pose and log-likelihood, in slot order: weights,
+    /// Neff, resampling below `threshold` × N (weights smoothed by
+    /// `smoothing` × N), and the lineage extended by the new poses.
+    pub fn correct(
+        &mut self,
+        step: u64,
+        mark: (f64, Pose2),
+        reports: &[(Pose2, Real)],
+        smoothing: Real,
+        threshold: Real,
+    ) -> Decision {
+        assert_eq!(reports.len(), self.len(), "one report per particle");
+        for (slot, &(_, l)) in reports.iter().enumerate() {
+            self.log_weights[slot] += l;
+            self.lineage_weights[slot] += l;
+        }
+        let (weights, neff) = normalize(&self.log_weights, smoothing);
+        let n = self.len();
+        let resampled = neff < threshold * n as Real;
+        let parents = if resampled {
+            let u = rng_for(self.seed, step, u64::MAX).random::<Real>();
+            low_variance(&weights, u)
+        } else {
+            (0..n).collect()
+        };
+        let (stamp, odometry) = mark;
+        let nodes: Vec<Arc<Node>> = parents
+            .iter()
+            .map(|&p| {
+                let parent = Some(self.nodes[p].clone());
+                Arc::new(Node { stamp, pose: reports[p].0, odometry, parent })
+            })
+            .collect();
+        self.nodes = nodes;
+        self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
+        self.log_weights = if resampled { vec![0.0; n] } else { self.log_weights.clone() };
+        Decision { neff, parents, resampled, best: self.best() }
+    }
+
+    /// The slot with the highest lineage weight (the last of equals).
+    pub fn best(&self) -> usize {
+        self.lineage_weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(slot, _)| slot)
+    }
+
+    /// The latest node of a slot.
+    pub fn node(&self, slot: usize) -> &Arc<Node> {
+        &self.nodes[slot]
+    }
+
+    /// A slot's lineage weight.
+    pub fn lineage_weight(&self, slot: usize) -> Real {
+        self.lineage_weights[slot]
+    }
+
+    /// The best particle's corrected poses, oldest first: (stamp, pose,
+    /// odometry).
+    pub fn best_trajectory(&self) -> Vec<(f64, Pose2, Pose2)> {
+        let mut out = Vec::new();
+        let mut node = self.nodes.get(self.best()).cloned();
+        while let Some(n) = node {
+            out.push((n.stamp, n.pose, n.odometry));
+            node = n.parent.clone();
+        }
+        out.reverse();
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(x: Real) -> Pose2 {
+        Pose2::new(x, 0.0, 0.0)
+    }
+
+    #[test]
+    fn resampling_favours_weight_and_the_lineage_follows_the_parents() {
+        let mut p = Population::start(4, 7, 0.0, at(0.0), at(0.0));
+        let reports: Vec<(Pose2, Real)> =
+            [(1.0, -900.0), (2.0, 0.0), (3.0, -900.0), (4.0, -900.0)].map(|(x, l)| (at(x), l)).to_vec();
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5);
+        assert!(d.resampled && d.neff < 2.0, "{d:?}");
+        assert_eq!(d.parents, vec![1, 1, 1, 1]);
+        assert_eq!(d.best, 3, "equal lineage weights: the last slot");
+        let t = p.best_trajectory();
+        assert_eq!(t.iter().map(|n| n.1.x).collect::<Vec<_>>(), vec![0.0, 2.0]);
+    }
+
+    #[test]
+    fn without_resampling_weights_accumulate_and_slots_keep_their_parents() {
+        let mut p = Population::start(3, 7, 0.0, at(0.0), at(0.0));
+        let reports = vec![(at(1.0), -1.0), (at(2.0), -1.1), (at(3.0), -1.2)];
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5);
+        assert!(!d.resampled);
+        assert_eq!((d.parents, d.best), (vec![0, 1, 2], 0));
+        assert_eq!(p.lineage_weight(2), -1.2);
+        let d = p.correct(2, (2.0, at(2.0)), &[(at(1.0), -5.0), (at(2.0), 0.0), (at(3.0), 0.0)], 3.0, 0.5);
+        assert_eq!(d.best, 1);
+    }
+}

@@ -1,0 +1,240 @@
+//! One task's share of the particles: the matcher side of the filter.
+//!
+//! A shard holds some slots' states. It predicts and corrects them, reports
+//! (slot, pose, log-likelihood, work) — never states — and after the
+//! resampler's decision hands the states it holds to the tasks that need
+//! them and adopts the ones it is sent. Random draws are keyed by the run
+//! seed, the reading and the slot, never by the task, so a particle evolves
+//! identically wherever it lives.
+
+use crate::geometry::{Pose2, Real};
+use crate::pf::model::{Correction, ParticleModel};
+use crate::pf::rng_for;
+
+/// One slot's correction, as sent to the resampler.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlotReport {
+    /// The particle's slot.
+    pub slot: usize,
+    /// Its refined pose.
+    pub pose: Pose2,
+    /// The reading's log-likelihood there.
+    pub log_likelihood: Real,
+    /// Work spent (pose evaluations).
+    pub evaluations: u32,
+}
+
+/// The states one task holds, by slot.
+pub struct Shard<M: ParticleModel> {
+    task: usize,
+    seed: u64,
+    /// (slot, state), in slot order.
+    held: Vec<(usize, M::State)>,
+    scratch: M::Scratch,
+}
+
+impl<M: ParticleModel> std::fmt::Debug for Shard<M> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let slots: Vec<usize> = self.held.iter().map(|h| h.0).collect();
+        f.debug_struct("Shard").field("task", &self.task).field("slots", &slots).finish()
+    }
+}
+
+impl<M: ParticleModel> Shard<M> {
+    /// Task `task`'s shard holding `slots`, all in the state `start`.
+    pub fn start(task: usize, seed: u64, slots: impl IntoIterator<Item = usize>, start: &M::State) -> Self {
+        let held = slots.into_iter().map(|s| (s, start.clone())).collect();
+        Shard { task, seed, held, scratch: M::Scratch::default() }
+    }
+
+    /// This shard's task.
+    pub fn task(&self) -> usize {
+        self.task
+    }
+
+    /// The slots held, in order.
+    pub fn slots(&self) -> impl Iterator<Item = usize> + '_ {
+        self.held.iter().map(|h| h.0)
+    }
+
+    /// The state of `slot`, if held here.
+    pub fn state(&self, slot: usize) -> Option<&M::State> {
+        self.held.binary_search_by_key(&slot, |h| h.0).ok().map(|i| &self.held[i].1)
+    }
+
+    /// Moves every held particle by the control of reading `step`.
+    pub fn predict(&mut self, model: &M, step: u64, control: &M::Control) {
+        for (slot, state) in &mut self.held {
+            let mut rng = rng_for(self.seed, step, *slot as u64);
+            model.predict(state, control, &mut rng);
+        }
+    }
+
+    /// Corrects every held particle against a reading.
+    pub fn correct(&mut self, model: &M, input: &M::Input) -> Vec<SlotReport> {
+        let scratch = &mut self.scratch;
+        model.prepare(input, scratch);
+        self.held
+            .iter_mut()
+            .map(|(slot, state)| {
+                let Correction { log_likelihood, evaluations } = model.correct(state, input, scratch);
+                SlotReport { slot: *slot, pose: model.pose(state), log_likelihood, evaluations }
+            })
+            .collect()
+    }
+
+    /// The states this shard must send after a decision: for every new
+    /// slot j placed on another task whose parent `parents[j]` is held
+    /// here, (task, j, parent's state), in new-slot order.
+    pub fn outgoing(&self, parents: &[usize], task_of: &[usize]) -> Vec<(usize, usize, M::State)> {
+        parents
+            .iter()
+            .zip(task_of)
+            .enumerate()
+            .filter(|&(_, (_, &to))| to != self.task)
+            .filter_map(|(j, (&p, &to))| self.state(p).map(|s| (to, j, s.clone())))
+            .collect()
+    }
+
+    /// How many states this shard must receive after a decision.
+    pub fn expected_incoming(&self, parents: &[usize], task_of: &[usize]) -> usize {
+        parents.iter().zip(task_of).filter(|&(&p, &to)| to == self.task && self.state(p).is_none()).count()
+    }
+
+    /// Takes up the new set after a decision: the new slots placed on this
+    /// task, copied from local parents or taken from `incoming` (new slot,
+    /// state). Fails, naming the slot, if a state is missing.
+    pub fn adopt(
+        &mut self,
+        parents: &[usize],
+        task_of: &[usize],
+        incoming: impl IntoIterator<Item = (usize, M::State)>,
+    ) -> Result<(), String> {
+        let mut received: Vec<(usize, Option<M::State>)> =
+            incoming.into_iter().map(|(j, s)| (j, Some(s))).collect();
+        received.sort_by_key(|r| r.0);
+        let mut held = Vec::with_capacity(task_of.iter().filter(|&&t| t == self.task).count());
+        for (j, (&p, &to)) in parents.iter().zip(task_of).enumerate() {
+            if to != self.task {
+                continue;
+            }
+            let state = match self.state(p) {
+                Some(s) => s.clone(),
+                None => {
+                    match received.binary_search_by_key(&j, |r| r.0).ok().and_then(|i| received[i].1.take()) {
+                        Some(s) => s,
+                        None => {
+                            return Err(format!(
+                                "task {}: no state for new slot {j} (parent {p})",
+                                self.task
+                            ));
+                        }
+                    }
+                }
+            };
+            held.push((j, state));
+        }
+        self.held = held;
+        Ok(())
+    }
+
+    /// Adds a correcting reading to every held particle; returns the work
+    /// counted.
+    pub fn update(&mut self, model: &M, input: &M::Input) -> u64 {
+        self.held.iter_mut().map(|(_, s)| model.update(s, input)).sum()
+    }
+
+    /// The states held, by slot.
+    pub fn held(&self) -> &[(usize, M::State)] {
+        &self.held
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::RngExt;
+
+    use super::*;
+
+    /// A model whose state records where it has been.
+    struct Walk;
+
+    impl ParticleModel for Walk {
+        type Input = f64;
+        type Control = f64;
+        type State = Vec<f64>;
+        type Scratch = ();
+        type Gate = ();
+
+        fn particles(&self) -> usize {
+            6
+        }
+        fn start(&self, first: &f64) -> Vec<f64> {
+            vec![*first]
+        }
+        fn mark(&self, input: &f64) -> (f64, Pose2) {
+            (*input, Pose2::IDENTITY)
+        }
+        fn control(&self, previous: &f64, input: &f64) -> f64 {
+            input - previous
+        }
+        fn gate(&self, (): &mut (), _: &f64) -> bool {
+            true
+        }
+        fn predict(&self, s: &mut Vec<f64>, c: &f64, rng: &mut rand_chacha::ChaCha8Rng) {
+            s.push(s.last().unwrap() + c + rng.random::<f64>());
+        }
+        fn correct(&self, s: &mut Vec<f64>, input: &f64, (): &mut ()) -> Correction {
+            Correction { log_likelihood: -(s.last().unwrap() - input).powi(2), evaluations: 1 }
+        }
+        fn update(&self, _: &mut Vec<f64>, _: &f64) -> u64 {
+            0
+        }
+        fn pose(&self, s: &Vec<f64>) -> Pose2 {
+            Pose2::new(*s.last().unwrap(), 0.0, 0.0)
+        }
+        fn state_bytes(&self, s: &Vec<f64>) -> u64 {
+            8 * s.len() as u64
+        }
+        fn weight_smoothing(&self) -> Real {
+            1.0
+        }
+        fn resample_threshold(&self) -> Real {
+            0.5
+        }
+    }
+
+    #[test]
+    fn a_transfer_delivers_exactly_the_parents_state() {
+        let mut shards: Vec<Shard<Walk>> =
+            (0..2).map(|t| Shard::start(t, 9, (0..6).filter(move |s| s % 2 == t), &vec![0.0])).collect();
+        for (step, shard) in shards.iter_mut().enumerate() {
+            shard.predict(&Walk, step as u64 + 1, &1.0);
+        }
+        let before: Vec<Vec<f64>> = (0..6).map(|s| shards[s % 2].state(s).unwrap().clone()).collect();
+        // New slots 0..6 descend from 5, 5, 0, 1, 2, 2 and go to tasks 0, 0, 0, 1, 1, 1.
+        let parents = [5, 5, 0, 1, 2, 2];
+        let task_of = [0, 0, 0, 1, 1, 1];
+        let sent: Vec<Vec<(usize, usize, Vec<f64>)>> =
+            shards.iter().map(|s| s.outgoing(&parents, &task_of)).collect();
+        assert_eq!(sent[1].iter().map(|t| (t.0, t.1)).collect::<Vec<_>>(), vec![(0, 0), (0, 1)]);
+        assert_eq!(sent[0].iter().map(|t| (t.0, t.1)).collect::<Vec<_>>(), vec![(1, 4), (1, 5)]);
+        assert_eq!(shards[0].expected_incoming(&parents, &task_of), 2);
+        assert_eq!(shards[1].expected_incoming(&parents, &task_of), 2);
+        let to = |t: usize| sent.iter().flatten().filter(move |s| s.0 == t).map(|s| (s.1, s.2.clone()));
+        let (in0, in1): (Vec<_>, Vec<_>) = (to(0).collect(), to(1).collect());
+        shards[0].adopt(&parents, &task_of, in0).unwrap();
+        shards[1].adopt(&parents, &task_of, in1).unwrap();
+        for (j, &p) in parents.iter().enumerate() {
+            assert_eq!(shards[task_of[j]].state(j), Some(&before[p]), "new slot {j}");
+        }
+        assert_eq!(shards[0].slots().collect::<Vec<_>>(), vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn a_missing_transfer_is_an_error_naming_the_slot() {
+        let mut shard: Shard<Walk> = Shard::start(0, 9, [0, 1], &vec![0.0]);
+        let e = shard.adopt(&[0, 3], &[0, 0], Vec::new()).unwrap_err();
+        assert!(e.contains("new slot 1") && e.contains("parent 3"), "{e}");
+    }
+}

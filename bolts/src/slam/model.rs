@@ -1,0 +1,145 @@
+//! GMapping's particle as a [`ParticleModel`]: a pose and a map; the
+//! odometry motion model predicts, the scan matcher corrects and weighs,
+//! the scan is integrated into the map after resampling.
+
+use rand_chacha::ChaCha8Rng;
+
+use crate::geometry::{Pose2, Real, normalize_angle};
+use crate::pf::model::{Correction, ParticleModel};
+use crate::sensor::LaserReading;
+use crate::slam::grid::TiledGrid;
+use crate::slam::integrate::integrate_scan;
+use crate::slam::matcher::{Matcher, PreparedScan};
+use crate::slam::motion::sample_motion;
+use crate::slam::options::SlamOptions;
+
+/// One SLAM hypothesis: where the robot is and the map built along the
+/// way (tiles shared with relatives until written).
+#[derive(Debug, Clone)]
+pub struct SlamParticle {
+    /// Current pose.
+    pub pose: Pose2,
+    /// The particle's map.
+    pub map: TiledGrid,
+}
+
+/// The odometry between two readings, and the later one's stamp.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryStep {
+    /// The later reading's stamp, seconds.
+    pub stamp: f64,
+    /// Odometry pose of the earlier reading.
+    pub from: Pose2,
+    /// Odometry pose of the later reading.
+    pub to: Pose2,
+}
+
+/// Per-task scratch: the prepared reading and the matcher's caches.
+#[derive(Debug, Default)]
+pub struct SlamScratch {
+    prepared: Option<PreparedScan>,
+    matcher: Matcher,
+}
+
+/// Travel since the last corrected reading (metres, radians).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Travelled {
+    linear: Real,
+    angular: Real,
+}
+
+/// GMapping's model, with its settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlamModel {
+    options: SlamOptions,
+}
+
+impl SlamModel {
+    /// The model; errors name the wrong option.
+    pub fn new(options: SlamOptions) -> Result<Self, String> {
+        options.check()?;
+        Ok(SlamModel { options })
+    }
+
+    /// The settings.
+    pub fn options(&self) -> &SlamOptions {
+        &self.options
+    }
+}
+
+impl ParticleModel for SlamModel {
+    type Input = LaserReading;
+    type Control = OdometryStep;
+    type State = SlamParticle;
+    type Scratch = SlamScratch;
+    type Gate = Travelled;
+
+    fn particles(&self) -> usize {
+        self.options.particles
+    }
+
+    fn start(&self, first: &LaserReading) -> SlamParticle {
+        let o = &self.options;
+        let mut map = TiledGrid::new(o.delta, (0.0, 0.0)).with_wall_threshold(o.occupied_threshold);
+        integrate_scan(&mut map, &first.odometry, first, o.max_urange);
+        map.take_clone_count();
+        SlamParticle { pose: first.odometry, map }
+    }
+
+    fn mark(&self, input: &LaserReading) -> (f64, Pose2) {
+        (input.stamp, input.odometry)
+    }
+
+    fn control(&self, previous: &LaserReading, input: &LaserReading) -> OdometryStep {
+        OdometryStep { stamp: input.stamp, from: previous.odometry, to: input.odometry }
+    }
+
+    fn gate(&self, travelled: &mut Travelled, step: &OdometryStep) -> bool {
+        let d = step.to.relative_to(&step.from);
+        travelled.linear += d.x.hypot(d.y);
+        travelled.angular += normalize_angle(d.theta).abs();
+        if travelled.linear < self.options.linear_update && travelled.angular < self.options.angular_update {
+            return false;
+        }
+        *travelled = Travelled::default();
+        true
+    }
+
+    fn predict(&self, p: &mut SlamParticle, step: &OdometryStep, rng: &mut ChaCha8Rng) {
+        p.pose = sample_motion(&p.pose, &step.from, &step.to, &self.options, rng);
+    }
+
+    fn prepare(&self, input: &LaserReading, scratch: &mut SlamScratch) {
+        scratch.prepared = Some(PreparedScan::new(input, &self.options));
+    }
+
+    fn correct(&self, p: &mut SlamParticle, input: &LaserReading, scratch: &mut SlamScratch) -> Correction {
+        let SlamScratch { prepared, matcher } = scratch;
+        let prepared = prepared.get_or_insert_with(|| PreparedScan::new(input, &self.options));
+        let m = matcher.refine(&p.map, &p.pose, prepared, &self.options);
+        // A climb that matched nothing leaves the pose where it was.
+        p.pose = m.pose;
+        Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations }
+    }
+
+    fn update(&self, p: &mut SlamParticle, input: &LaserReading) -> u64 {
+        integrate_scan(&mut p.map, &p.pose, input, self.options.max_urange);
+        p.map.take_clone_count()
+    }
+
+    fn pose(&self, p: &SlamParticle) -> Pose2 {
+        p.pose
+    }
+
+    fn state_bytes(&self, p: &SlamParticle) -> u64 {
+        TiledGrid::distinct_tiles([&p.map]).1 as u64
+    }
+
+    fn weight_smoothing(&self) -> Real {
+        self.options.ogain
+    }
+
+    fn resample_threshold(&self) -> Real {
+        self.options.resample_threshold
+    }
+}
