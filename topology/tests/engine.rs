@@ -606,6 +606,73 @@ inputs = [ { from = "looper" } ]
     assert_eq!(report.component("looper").unwrap().undelivered, 0);
 }
 
+/// Takes one number, sends it round the relay and holds its inputs until
+/// it comes back: at most one number is ever outstanding.
+struct Gatekeeper {
+    outstanding: u64,
+    most_outstanding: Arc<AtomicU64>,
+    log: Log,
+}
+
+impl Bolt for Gatekeeper {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<Num>().input::<Hop>().output::<Hop>("default");
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        if let Some(n) = input.get::<Num>() {
+            self.outstanding += 1;
+            self.most_outstanding.fetch_max(self.outstanding, Ordering::SeqCst);
+            out.emit("default", Hop { origin: n.seq, hops: 1 }).await?;
+            out.hold_inputs(true);
+        } else {
+            let hop = input.get::<Hop>().unwrap();
+            self.outstanding -= 1;
+            self.log.lock().unwrap().push(("back".into(), 0, hop.origin));
+            out.hold_inputs(false);
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn a_bolt_holding_its_inputs_takes_only_feedback_until_it_lets_go() {
+    let h = Harness::new();
+    let mut r = h.registry();
+    let (log, most) = (h.log.clone(), Arc::new(AtomicU64::new(0)));
+    let m = most.clone();
+    r.register_bolt("gatekeeper", move |_: &Params| {
+        Ok(Gatekeeper { outstanding: 0, most_outstanding: m.clone(), log: log.clone() })
+    });
+    r.register_bolt("relay", |_: &Params| Ok::<_, ParamError>(Relay));
+    let toml = r#"
+[topology]
+name = "gate"
+
+[[spout]]
+name = "src"
+kind = "numbers"
+params = { count = 300 }
+
+[[bolt]]
+name = "gate"
+kind = "gatekeeper"
+inputs = [ { from = "src", queue = 8 }, { from = "relay", feedback = true } ]
+
+[[bolt]]
+name = "relay"
+kind = "relay"
+inputs = [ { from = "gate" } ]
+"#;
+    let topology = Topology::validate(TopologySpec::parse("t.toml", toml).unwrap(), &r).unwrap();
+    let report = squall_topology::run(&topology, &RunOptions::default()).unwrap();
+    let back: Vec<u64> = h.log.lock().unwrap().iter().map(|e| e.2).collect();
+    assert_eq!(back, (0..300).collect::<Vec<_>>(), "every number, in order, nothing lost");
+    assert_eq!(most.load(Ordering::SeqCst), 1, "a number arrived while the inputs were held");
+    let gate = report.component("gate").unwrap();
+    assert_eq!((gate.received, gate.dropped), (600, 0));
+}
+
 /// Sleeps 2 ms per tuple and counts its 1 ms ticks.
 struct Ticker {
     ticks: Arc<AtomicU64>,

@@ -72,6 +72,8 @@ pub struct Emitter {
     pub(crate) input_failed: bool,
     pub(crate) stats: TaskStats,
     pub(crate) aborting: Arc<AtomicBool>,
+    /// Set by [`Emitter::hold_inputs`].
+    pub(crate) holding: bool,
     task: usize,
 }
 
@@ -91,6 +93,7 @@ impl Emitter {
             input_failed: false,
             stats: TaskStats::default(),
             aborting,
+            holding: false,
             task,
         }
     }
@@ -117,6 +120,16 @@ impl Emitter {
     ) -> Result<(), EmitError> {
         let index = self.stream_index::<T>(stream)?;
         self.emit_payload(index, Arc::new(value), Some(task), None).await
+    }
+
+    /// Holds back this bolt's inputs (`true`) or lets them through again
+    /// (`false`). While held, the task takes tuples only from its
+    /// feedback edges and its peer queue; the other inputs wait in their
+    /// bounded queues, so their producers block once those are full: a
+    /// bolt waiting on feedback holds back its sources without losing or
+    /// buffering anything. Takes effect from the next tuple.
+    pub fn hold_inputs(&mut self, hold: bool) {
+        self.holding = hold;
     }
 
     /// Sends `value` to sibling task `task` of this component (peer

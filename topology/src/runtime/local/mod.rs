@@ -130,7 +130,12 @@ pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunEr
                 }
                 Factory::Bolt(f) => {
                     let tick = planned.spec.tick.or(planned.declared.tick);
-                    let task = BoltTask::new(common, wiring.inboxes[c][t].clone(), tick);
+                    let inbox = wiring.inboxes[c][t].clone();
+                    // Inputs in file order, then the peer queue: only the
+                    // non-feedback inputs wait while the bolt holds them.
+                    let mut holdable: Vec<bool> = planned.spec.inputs.iter().map(|i| !i.feedback).collect();
+                    holdable.resize(inbox.len(), false);
+                    let task = BoltTask::new(common, inbox, holdable, tick);
                     let f = f.clone();
                     std::thread::Builder::new()
                         .name(name)

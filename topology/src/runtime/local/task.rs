@@ -62,30 +62,60 @@ impl TaskCommon {
 pub(crate) struct BoltTask {
     pub(crate) common: TaskCommon,
     pub(crate) inbox: Vec<Arc<EdgeQueue>>,
+    /// Per inbox queue: whether `Emitter::hold_inputs` holds it back
+    /// (every input but feedback edges and the peer queue).
+    holdable: Vec<bool>,
     pub(crate) tick: Option<Duration>,
     batch: VecDeque<Tuple>,
     batch_from: usize,
     batch_taken: usize,
+    /// The rest of a batch from a held queue, taken but not yet executed
+    /// (and not released: its queue still counts it).
+    parked: VecDeque<Tuple>,
+    parked_from: usize,
+    parked_taken: usize,
     next_queue: usize,
 }
 
 impl BoltTask {
-    pub(crate) fn new(common: TaskCommon, inbox: Vec<Arc<EdgeQueue>>, tick: Option<Duration>) -> Self {
+    pub(crate) fn new(
+        common: TaskCommon,
+        inbox: Vec<Arc<EdgeQueue>>,
+        holdable: Vec<bool>,
+        tick: Option<Duration>,
+    ) -> Self {
         BoltTask {
             common,
             inbox,
+            holdable,
             tick,
             batch: VecDeque::with_capacity(MAX_BATCH),
             batch_from: 0,
             batch_taken: 0,
+            parked: VecDeque::new(),
+            parked_from: 0,
+            parked_taken: 0,
             next_queue: 0,
         }
     }
 
+    fn holding(&self) -> bool {
+        self.common.emitter.holding
+    }
+
     fn take_batch(&mut self) -> bool {
+        if !self.holding() && !self.parked.is_empty() {
+            std::mem::swap(&mut self.batch, &mut self.parked);
+            self.batch_from = self.parked_from;
+            self.batch_taken = std::mem::take(&mut self.parked_taken);
+            return true;
+        }
         let n = self.inbox.len();
         for k in 0..n {
             let q = (self.next_queue + k) % n;
+            if self.holdable[q] && self.holding() {
+                continue;
+            }
             let taken = self.inbox[q].take(&mut self.batch, MAX_BATCH);
             if taken > 0 {
                 self.batch_from = q;
@@ -109,6 +139,14 @@ impl BoltTask {
             }
         }
         false
+    }
+
+    /// Keeps the rest of the current batch aside while its queue is held.
+    fn park_batch(&mut self) {
+        debug_assert!(self.parked.is_empty(), "a held queue is not taken from");
+        std::mem::swap(&mut self.batch, &mut self.parked);
+        self.parked_from = self.batch_from;
+        self.parked_taken = std::mem::take(&mut self.batch_taken);
     }
 
     fn release_batch(&mut self) {
@@ -186,6 +224,9 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
                 // A busy task still ticks, between tuples.
                 tick(bolt, t, &mut next_tick, clock, true).await?;
                 clock = Instant::now();
+            }
+            if t.holding() && t.holdable[t.batch_from] && !t.batch.is_empty() {
+                t.park_batch();
             }
         }
         t.release_batch();
