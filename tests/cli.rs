@@ -450,14 +450,54 @@ fn slam_on_the_simulator_and_its_argument_checks() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let component =
         |name: &str| m["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
-    let processed = component("matcher")["custom"]["processed_scans"].as_u64().unwrap();
+    let processed = component("resampler")["custom"]["processed_scans"].as_u64().unwrap();
     assert!(processed > 6, "{processed} processed scans");
     assert_eq!(component("map")["received"].as_u64().unwrap(), 400 + processed / 3 + 1);
-    let out = squall(&["slam", "--matchers", "2", "--out", dir.to_str().unwrap()]);
+    let out = squall(&["slam", "--matchers", "0", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(text(&out.stderr).contains("--matchers 2: only 1 for now"), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("--matchers must be at least 1"), "{}", text(&out.stderr));
     let out = squall(&["slam", "--cutoff", "fast", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("cutoff"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `squall slam` with K matcher tasks writes byte-identical `trajectory.tum`
+/// and `map.pgm` to K = 1, for every K up to 8.
+fn assert_matchers_agree(name: &str, args: &[&str]) {
+    let run = |k: usize| {
+        let dir = out_dir(&format!("{name}-k{k}"));
+        let k_text = k.to_string();
+        let mut all = vec!["slam", "--matchers", &k_text, "--out", dir.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let out = squall(&all);
+        assert!(out.status.success(), "K = {k}: {}", text(&out.stderr));
+        let read = |f: &str| std::fs::read(dir.join(f)).unwrap_or_else(|e| panic!("K = {k}: {f}: {e}"));
+        let files = (read("trajectory.tum"), read("map.pgm"), read("metrics.json"));
+        let _ = std::fs::remove_dir_all(&dir);
+        files
+    };
+    let (trajectory, map, _) = run(1);
+    let mut moved = 0;
+    for k in 2..=8 {
+        let (t, m, metrics) = run(k);
+        assert!(t == trajectory, "{name}: K = {k} trajectory.tum differs from K = 1");
+        assert!(m == map, "{name}: K = {k} map.pgm differs from K = 1");
+        let v: serde_json::Value = serde_json::from_slice(&metrics).unwrap();
+        let resampler =
+            v["components"].as_array().unwrap().iter().find(|c| c["name"] == "resampler").unwrap();
+        moved += resampler["custom"]["particles_moved"]["mean"].as_f64().map_or(0.0, |m| m.ceil()) as u64;
+    }
+    assert!(moved > 0, "{name}: no particle ever moved between tasks: the exchange went untested");
+}
+
+#[test]
+fn slam_on_the_simulator_is_the_same_for_every_matcher_count() {
+    assert_matchers_agree("slam-k-sim", &["--max-scans", "600", "--particles", "12"]);
+}
+
+#[test]
+fn slam_on_an_aces_prefix_is_the_same_for_every_matcher_count() {
+    let log = shared_data("laser/aces.clf");
+    assert_matchers_agree("slam-k-aces", &["--log", &log, "--max-scans", "500"]);
 }

@@ -9,6 +9,7 @@ pub mod geometry;
 pub mod linemap;
 pub mod map;
 pub mod pf;
+pub mod pf_topology;
 pub mod sensor;
 pub mod sinks;
 pub mod slam;

@@ -15,6 +15,6 @@ pub fn registry() -> Registry {
     sink::register(&mut r);
     squall_spouts::register(&mut r);
     squall_bolts::sinks::register(&mut r);
-    squall_bolts::slam::register(&mut r);
+    squall_bolts::pf_topology::register(&mut r);
     r
 }

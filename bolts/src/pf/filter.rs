@@ -118,11 +118,7 @@ where
         let (task_of, moved_now) = if decision.resampled {
             let placements: Vec<Placement> = parents
                 .iter()
-                .map(|&p| {
-                    let home = self.task_of[p];
-                    let bytes = self.shards[home].state(p).map_or(0, |s| model.state_bytes(s));
-                    Placement { home, bytes }
-                })
+                .map(|&p| Placement { home: self.task_of[p], bytes: reports[p].bytes })
                 .collect();
             let task_of = assign(&placements, self.tasks);
             let m = moved(&placements, &task_of);

@@ -12,6 +12,7 @@ pub mod model;
 pub mod population;
 pub mod resample;
 pub mod shard;
+pub mod trajectory;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

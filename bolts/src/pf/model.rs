@@ -5,6 +5,7 @@
 use rand_chacha::ChaCha8Rng;
 
 use crate::geometry::{Pose2, Real};
+use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 
 /// The model-specific parts of a particle filter.
 ///
@@ -76,6 +77,11 @@ pub trait ParticleModel: Send + Sync + 'static {
 
     /// Resample when Neff falls below this fraction of the particles.
     fn resample_threshold(&self) -> Real;
+
+    /// How the trajectory fills in readings between corrections.
+    fn between_readings(&self) -> (BetweenScans, NoiseWeights) {
+        (BetweenScans::Odometry, NoiseWeights { per_metre: 0.0, per_radian: 0.0 })
+    }
 }
 
 /// One particle's correction.

@@ -7,12 +7,14 @@
 //! seed, the reading and the slot, never by the task, so a particle evolves
 //! identically wherever it lives.
 
+use serde::{Deserialize, Serialize};
+
 use crate::geometry::{Pose2, Real};
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::rng_for;
 
 /// One slot's correction, as sent to the resampler.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SlotReport {
     /// The particle's slot.
     pub slot: usize,
@@ -22,6 +24,8 @@ pub struct SlotReport {
     pub log_likelihood: Real,
     /// Work spent (pose evaluations).
     pub evaluations: u32,
+    /// Bytes of its state (what moves if a child is placed elsewhere).
+    pub bytes: u64,
 }
 
 /// The states one task holds, by slot.
@@ -78,7 +82,8 @@ impl<M: ParticleModel> Shard<M> {
             .iter_mut()
             .map(|(slot, state)| {
                 let Correction { log_likelihood, evaluations } = model.correct(state, input, scratch);
-                SlotReport { slot: *slot, pose: model.pose(state), log_likelihood, evaluations }
+                let (pose, bytes) = (model.pose(state), model.state_bytes(state));
+                SlotReport { slot: *slot, pose, log_likelihood, evaluations, bytes }
             })
             .collect()
     }

@@ -13,12 +13,13 @@
 //! of shards with the same result.
 
 use crate::geometry::Pose2;
+use crate::pf::ParticleModel;
+use crate::pf::trajectory;
 use crate::pf::{Filter, StepReport};
 use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::model::{SlamModel, SlamParticle};
 use crate::slam::options::SlamOptions;
-use crate::slam::trajectory::{self, NoiseWeights};
 
 /// GMapping's filter.
 #[derive(Debug)]
@@ -74,9 +75,8 @@ impl Rbpf {
     pub fn lineage_poses(&self, scans: impl IntoIterator<Item = (f64, Pose2)>) -> Vec<(f64, Pose2)> {
         let Some(population) = self.filter.population() else { return Vec::new() };
         let scans: Vec<(f64, Pose2)> = scans.into_iter().collect();
-        let o = self.filter.model().options();
-        let noise = NoiseWeights { per_metre: o.srr, per_radian: o.str };
-        trajectory::fill(&population.best_trajectory(), &scans, o.between_scans, noise)
+        let (between, noise) = self.filter.model().between_readings();
+        trajectory::fill(&population.best_trajectory(), &scans, between, noise)
     }
 }
 

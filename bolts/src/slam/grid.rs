@@ -9,6 +9,7 @@
 //! dense array that grows as the robot explores, so a lookup is two
 //! indexings, with no hashing and no atomic operation.
 
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 use crate::geometry::{LineStepper, Real};
@@ -30,7 +31,7 @@ fn floor(v: Real) -> i64 {
 }
 
 /// What one cell has seen.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Cell {
     /// Mean x of the beam end points in this cell, metres (kept as a mean
     /// so the scan matcher reads it without dividing).
@@ -68,7 +69,8 @@ impl Cell {
 /// A square block of cells, with one bit per cell saying whether it is a
 /// wall and one saying whether it is free, so the scan matcher finds the
 /// few candidate cells of a beam with bit operations before reading any.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(into = "TileWire", try_from = "TileWire")]
 pub struct Tile {
     cells: Box<[Cell; TILE_SIDE * TILE_SIDE]>,
     /// Bit x of `walls[y]`: cell (x, y) of the tile is a wall.
@@ -84,6 +86,39 @@ impl Default for Tile {
             walls: [0; TILE_SIDE],
             free: [u32::MAX; TILE_SIDE],
         }
+    }
+}
+
+/// A tile as it travels between processes: its cells row by row and its
+/// bit rows.
+#[derive(Serialize, Deserialize)]
+struct TileWire {
+    cells: Vec<Cell>,
+    walls: Vec<u32>,
+    free: Vec<u32>,
+}
+
+impl From<Tile> for TileWire {
+    fn from(t: Tile) -> Self {
+        TileWire { cells: t.cells.to_vec(), walls: t.walls.to_vec(), free: t.free.to_vec() }
+    }
+}
+
+impl TryFrom<TileWire> for Tile {
+    type Error = String;
+
+    fn try_from(w: TileWire) -> Result<Self, String> {
+        let n = w.cells.len();
+        let cells: Box<[Cell; TILE_SIDE * TILE_SIDE]> = w
+            .cells
+            .into_boxed_slice()
+            .try_into()
+            .map_err(|_| format!("a tile holds {} cells, got {n}", TILE_SIDE * TILE_SIDE))?;
+        let rows = |v: Vec<u32>| -> Result<[u32; TILE_SIDE], String> {
+            let n = v.len();
+            v.try_into().map_err(|_| format!("a tile has {TILE_SIDE} bit rows, got {n}"))
+        };
+        Ok(Tile { cells, walls: rows(w.walls)?, free: rows(w.free)? })
     }
 }
 
@@ -123,7 +158,7 @@ impl Cell {
 
 /// An occupancy grid that grows on demand; cell (0, 0) is at world
 /// (`origin`), cells are `resolution` metres.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TiledGrid {
     resolution: Real,
     /// 1 / `resolution`: a cell lookup multiplies rather than divides.
@@ -139,6 +174,7 @@ pub struct TiledGrid {
     wall_threshold: Real,
     /// Tiles cloned because they were shared (copy-on-write), since the
     /// counter was last taken.
+    #[serde(skip)]
     clones: u64,
 }
 

@@ -3,7 +3,6 @@
 //! resampling and the serial filter are here; the topology, the CLI and the
 //! accuracy and speed work follow.
 
-pub mod bolt;
 pub mod filter;
 pub mod grid;
 pub mod integrate;
@@ -11,9 +10,3 @@ pub mod matcher;
 pub mod model;
 pub mod motion;
 pub mod options;
-pub mod trajectory;
-
-/// Registers `slam.rbpf`.
-pub fn register(r: &mut squall_topology::Registry) {
-    r.register_bolt("slam.rbpf", bolt::SlamBolt::from_params);
-}

@@ -3,11 +3,13 @@
 //! the scan is integrated into the map after resampling.
 
 use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::pf::model::{Correction, ParticleModel};
+use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 use crate::sensor::LaserReading;
-use crate::slam::grid::TiledGrid;
+use crate::slam::grid::{TILE_BYTES, TiledGrid};
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::motion::sample_motion;
@@ -15,7 +17,7 @@ use crate::slam::options::SlamOptions;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
 /// way (tiles shared with relatives until written).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SlamParticle {
     /// Current pose.
     pub pose: Pose2,
@@ -24,7 +26,7 @@ pub struct SlamParticle {
 }
 
 /// The odometry between two readings, and the later one's stamp.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct OdometryStep {
     /// The later reading's stamp, seconds.
     pub stamp: f64,
@@ -132,7 +134,7 @@ impl ParticleModel for SlamModel {
     }
 
     fn state_bytes(&self, p: &SlamParticle) -> u64 {
-        TiledGrid::distinct_tiles([&p.map]).1 as u64
+        (p.map.tile_count() * TILE_BYTES) as u64
     }
 
     fn weight_smoothing(&self) -> Real {
@@ -141,5 +143,10 @@ impl ParticleModel for SlamModel {
 
     fn resample_threshold(&self) -> Real {
         self.options.resample_threshold
+    }
+
+    fn between_readings(&self) -> (BetweenScans, NoiseWeights) {
+        let o = &self.options;
+        (o.between_scans, NoiseWeights { per_metre: o.srr, per_radian: o.str })
     }
 }

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::Real;
-pub use crate::slam::trajectory::BetweenScans;
+pub use crate::pf::trajectory::BetweenScans;
 
 /// A limit on pose evaluations per particle per reading (seed 003's
 /// scan-matching cutoff). In files: `"none"` or a number.

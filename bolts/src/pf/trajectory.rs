@@ -30,7 +30,7 @@ pub type Corrected = (f64, Pose2, Pose2);
 
 /// Odometry noise weights: how much translation noise one metre of travel
 /// and one radian of turning add (the motion model's srr and str).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct NoiseWeights {
     /// Per metre of translation.
     pub per_metre: Real,

@@ -1,0 +1,258 @@
+//! `pf.matcher`: one task's share of the particles. Each task predicts and
+//! corrects the particles it holds, reports (slot, pose, log-weight,
+//! evaluations, state size) to the resampler — never states — and after
+//! the resampler's decision sends the parents' states other tasks now need
+//! straight to them (peer exchange), adopts the ones it is sent, and
+//! updates its particles with the reading. The task holding the best
+//! particle emits its snapshot (the map, for SLAM) every `map_interval`
+//! corrections and at the end.
+//! Metrics: `evaluations_per_particle`, `correct_us`, `update_us`,
+//! `particles_received`.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::time::Instant;
+
+use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
+
+use crate::pf::assign::loads;
+use crate::pf::shard::Shard;
+use crate::pf_topology::HostedModel;
+use crate::pf_topology::messages::{Decision, Reading, Report, Settings, Transfer};
+
+/// A correction waiting for its decision and transfers.
+#[derive(Debug)]
+struct Pending<I> {
+    reading: Arc<Reading<I>>,
+    decision: Option<Arc<Decision>>,
+    sent: bool,
+    started: Option<Instant>,
+}
+
+/// The matcher for model `M`.
+pub struct Matcher<M: HostedModel> {
+    model: M,
+    map_interval: u64,
+    task: usize,
+    tasks: usize,
+    seed: u64,
+    shard: Option<Shard<M>>,
+    gate: M::Gate,
+    previous: Option<Arc<Reading<M::Input>>>,
+    /// Readings that arrived while a correction was in progress.
+    queued: VecDeque<Arc<Reading<M::Input>>>,
+    pending: Option<Pending<M::Input>>,
+    /// States received for the pending correction.
+    received: Vec<(usize, M::State)>,
+    best: usize,
+    corrections: u64,
+}
+
+impl<M: HostedModel> std::fmt::Debug for Matcher<M> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Matcher").field("task", &self.task).field("tasks", &self.tasks).finish()
+    }
+}
+
+impl<M: HostedModel> Matcher<M> {
+    /// Builds it: every model setting, plus `map_interval` (corrections
+    /// between snapshots; 0, the default, only at the end).
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let mut table = p.table().clone();
+        table.remove("model");
+        let map_interval = match table.remove("map_interval") {
+            None => 0,
+            Some(v) => v
+                .as_integer()
+                .and_then(|i| u64::try_from(i).ok())
+                .ok_or_else(|| ParamError::new(format!("map_interval must be a count ≥ 0, got {v}")))?,
+        };
+        let model = M::from_table(table).map_err(ParamError::new)?;
+        Ok(Matcher {
+            model,
+            map_interval,
+            task: 0,
+            tasks: 1,
+            seed: 0,
+            shard: None,
+            gate: M::Gate::default(),
+            previous: None,
+            queued: VecDeque::new(),
+            pending: None,
+            received: Vec::new(),
+            best: 0,
+            corrections: 0,
+        })
+    }
+
+    fn settings(&self) -> Settings {
+        let (between, noise) = self.model.between_readings();
+        Settings {
+            smoothing: self.model.weight_smoothing(),
+            threshold: self.model.resample_threshold(),
+            between,
+            noise,
+        }
+    }
+
+    /// Works through queued readings until one waits for a decision.
+    async fn pump(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        while self.pending.is_none() {
+            let Some(reading) = self.queued.pop_front() else { break };
+            self.take_reading(reading, out).await?;
+        }
+        Ok(())
+    }
+
+    async fn take_reading(
+        &mut self,
+        reading: Arc<Reading<M::Input>>,
+        out: &mut Emitter,
+    ) -> Result<(), BoxError> {
+        let (task, tasks) = (self.task as u32, self.tasks as u32);
+        let mark = self.model.mark(&reading.input);
+        let Some(previous) = self.previous.replace(reading.clone()) else {
+            let n = self.model.particles();
+            let state = self.model.start(&reading.input);
+            let load = loads(n, self.tasks);
+            let first: usize = load[..self.task].iter().sum();
+            let pose = self.model.pose(&state);
+            // Equal lineage weights: the best is the last slot.
+            self.best = n - 1;
+            self.shard = Some(Shard::start(self.task, self.seed, first..first + load[self.task], &state));
+            let (particles, settings) = (n as u32, self.settings());
+            let started = Report::Started { task, tasks, mark, pose, particles, settings };
+            out.emit("report", started).await?;
+            // The start counts as the first correction (it maps the first
+            // reading).
+            return self.corrected(out).await;
+        };
+        let shard = self.shard.as_mut().ok_or("pf.matcher: no particles yet")?;
+        let control = self.model.control(&previous.input, &reading.input);
+        shard.predict(&self.model, reading.step, &control);
+        let step = reading.step;
+        if !self.model.gate(&mut self.gate, &control) {
+            return Ok(out.emit("report", Report::Predicted { step, task, tasks, mark }).await?);
+        }
+        let started = Instant::now();
+        let slots = shard.correct(&self.model, &reading.input);
+        let busy_us = started.elapsed().as_micros() as u64;
+        out.record("correct_us", busy_us);
+        for s in &slots {
+            out.record("evaluations_per_particle", u64::from(s.evaluations));
+        }
+        let settings = self.settings();
+        out.emit("report", Report::Corrected { step, task, tasks, mark, slots, busy_us, settings }).await?;
+        self.pending = Some(Pending { reading, decision: None, sent: false, started: None });
+        Ok(())
+    }
+
+    /// Carries out the pending decision as far as the transfers received
+    /// allow.
+    async fn advance(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        let Some(pending) = self.pending.as_mut() else { return Ok(()) };
+        let Some(decision) = pending.decision.clone() else { return Ok(()) };
+        let shard = self.shard.as_mut().ok_or("pf.matcher: no particles yet")?;
+        let parents: Vec<usize> = decision.parents.iter().map(|&p| p as usize).collect();
+        let task_of: Vec<usize> = decision.task_of.iter().map(|&t| t as usize).collect();
+        if !pending.sent {
+            pending.started = Some(Instant::now());
+            let mut by_task: Vec<Vec<(u32, M::State)>> = (0..self.tasks).map(|_| Vec::new()).collect();
+            for (to, slot, state) in shard.outgoing(&parents, &task_of) {
+                by_task[to].push((slot as u32, state));
+            }
+            for (to, states) in by_task.into_iter().enumerate().filter(|(_, s)| !s.is_empty()) {
+                out.send_peer(to, Transfer { step: decision.step, states }).await?;
+            }
+            pending.sent = true;
+        }
+        if self.received.len() < shard.expected_incoming(&parents, &task_of) {
+            return Ok(());
+        }
+        out.record("particles_received", self.received.len() as u64);
+        shard.adopt(&parents, &task_of, self.received.drain(..))?;
+        let update_work = shard.update(&self.model, &pending.reading.input);
+        let busy_us = pending.started.map_or(0, |s| s.elapsed().as_micros() as u64);
+        out.record("update_us", busy_us);
+        self.best = decision.best as usize;
+        let (step, task, tasks) = (decision.step, self.task as u32, self.tasks as u32);
+        out.emit("report", Report::Updated { step, task, tasks, busy_us, update_work }).await?;
+        self.pending = None;
+        self.corrected(out).await
+    }
+
+    /// Counts a finished correction; every `map_interval`-th, the holder of
+    /// the best particle emits its snapshot.
+    async fn corrected(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        self.corrections += 1;
+        if self.map_interval > 0 && self.corrections % self.map_interval == 0 {
+            self.emit_snapshot(out).await?;
+        }
+        Ok(())
+    }
+
+    async fn emit_snapshot(&self, out: &mut Emitter) -> Result<(), BoxError> {
+        if let Some(state) = self.shard.as_ref().and_then(|s| s.state(self.best)) {
+            out.emit("map", self.model.snapshot(state)).await?;
+        }
+        Ok(())
+    }
+}
+
+impl<M: HostedModel> Bolt for Matcher<M> {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<Reading<M::Input>>()
+            .input::<Decision>()
+            .peer::<Transfer<M::State>>()
+            .output::<Report>("report")
+            .output::<M::Snapshot>("map");
+    }
+
+    async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        self.task = ctx.task_index();
+        self.tasks = ctx.task_count();
+        self.seed = ctx.seed();
+        Ok(())
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let input = match input.into_arc::<Reading<M::Input>>() {
+            Ok(reading) => {
+                self.queued.push_back(reading);
+                return self.pump(out).await;
+            }
+            Err(input) => input,
+        };
+        let input = match input.into_arc::<Decision>() {
+            Ok(decision) => {
+                let pending =
+                    self.pending.as_mut().ok_or("pf.matcher: a decision with no correction pending")?;
+                if decision.step != pending.reading.step {
+                    let (got, want) = (decision.step, pending.reading.step);
+                    return Err(
+                        format!("pf.matcher: decision for reading {got} while {want} is pending").into()
+                    );
+                }
+                pending.decision = Some(decision);
+                self.advance(out).await?;
+                return self.pump(out).await;
+            }
+            Err(input) => input,
+        };
+        let transfer = input
+            .into_arc::<Transfer<M::State>>()
+            .map_err(|_| "pf.matcher takes readings, decisions, transfers")?;
+        let transfer = Arc::try_unwrap(transfer)
+            .unwrap_or_else(|shared| Transfer { step: shared.step, states: shared.states.clone() });
+        self.received.extend(transfer.states.into_iter().map(|(slot, s)| (slot as usize, s)));
+        self.advance(out).await?;
+        self.pump(out).await
+    }
+
+    async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        if self.pending.is_some() || !self.queued.is_empty() {
+            return Err("pf.matcher: the run ended with a reading unfinished".into());
+        }
+        self.emit_snapshot(out).await
+    }
+}

@@ -1,0 +1,130 @@
+//! What the particle filter's components send each other.
+
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{Pose2, Real};
+use crate::pf::shard::SlotReport;
+use crate::pf::trajectory::{BetweenScans, NoiseWeights};
+
+/// Dispatcher → every matcher task: a reading and its number in the run
+/// (0 starts the filter).
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(bound(serialize = "I: Serialize", deserialize = "I: serde::de::DeserializeOwned"))]
+pub struct Reading<I> {
+    /// The reading's number.
+    pub step: u64,
+    /// The reading, shared by every matcher task.
+    pub input: Arc<I>,
+}
+
+/// Resampler → dispatcher (feedback): every matcher is done with `step`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Ready {
+    /// The reading.
+    pub step: u64,
+    /// Whether it corrected the particles (rather than only moving them).
+    pub corrected: bool,
+}
+
+/// What the resampler needs of the model, sent by the matchers (which
+/// hold the model's settings) with every correction.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// Weights are smoothed by dividing log-weights by this × N.
+    pub smoothing: Real,
+    /// Resample below this fraction of N.
+    pub threshold: Real,
+    /// How the trajectory fills readings between corrections.
+    pub between: BetweenScans,
+    /// Odometry noise weights for that filling.
+    pub noise: NoiseWeights,
+}
+
+/// Matcher task → resampler.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Report {
+    /// The first reading started the filter: every particle at `pose`.
+    Started {
+        /// The reporting task and how many there are.
+        task: u32,
+        /// Matcher tasks.
+        tasks: u32,
+        /// The reading's stamp and odometry.
+        mark: (f64, Pose2),
+        /// The particles' pose.
+        pose: Pose2,
+        /// Particles in the set.
+        particles: u32,
+        /// The model's resampling settings.
+        settings: Settings,
+    },
+    /// A reading moved the particles only.
+    Predicted {
+        /// The reading.
+        step: u64,
+        /// The reporting task.
+        task: u32,
+        /// Matcher tasks.
+        tasks: u32,
+        /// The reading's stamp and odometry.
+        mark: (f64, Pose2),
+    },
+    /// A reading corrected this task's particles.
+    Corrected {
+        /// The reading.
+        step: u64,
+        /// The reporting task.
+        task: u32,
+        /// Matcher tasks.
+        tasks: u32,
+        /// The reading's stamp and odometry.
+        mark: (f64, Pose2),
+        /// One report per particle held.
+        slots: Vec<SlotReport>,
+        /// Microseconds the task spent correcting.
+        busy_us: u64,
+        /// The model's resampling settings.
+        settings: Settings,
+    },
+    /// The task adopted the new set and updated it with the reading.
+    Updated {
+        /// The reading.
+        step: u64,
+        /// The reporting task.
+        task: u32,
+        /// Matcher tasks.
+        tasks: u32,
+        /// Microseconds spent exchanging and updating.
+        busy_us: u64,
+        /// Work the updates counted (map tiles cloned, for SLAM).
+        update_work: u64,
+    },
+}
+
+/// Resampler → every matcher task (feedback): the new particle set and
+/// where each particle lives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Decision {
+    /// The reading.
+    pub step: u64,
+    /// New slot j descends from old slot `parents[j]`.
+    pub parents: Vec<u32>,
+    /// The task that holds new slot j.
+    pub task_of: Vec<u32>,
+    /// The best particle's new slot.
+    pub best: u32,
+}
+
+/// Matcher task → matcher task (peer exchange): parents' states for new
+/// slots the receiver holds from now on. In-process the states' maps share
+/// their tiles with the sender's.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(bound(serialize = "S: Serialize", deserialize = "S: serde::de::DeserializeOwned"))]
+pub struct Transfer<S> {
+    /// The reading whose decision this carries out.
+    pub step: u64,
+    /// (new slot, state).
+    pub states: Vec<(u32, S)>,
+}

@@ -1,0 +1,232 @@
+//! `pf.resampler`: gathers every matcher task's reports for a reading;
+//! after a correction it normalizes the weights, computes Neff, resamples
+//! selectively, assigns the new set to the tasks (Hungarian algorithm:
+//! equal load, fewest bytes moved) and broadcasts the decision. It owns the
+//! lineage tree, so it emits the best estimate for every reading on `pose`
+//! and, at the end, the best particle's trajectory on `trajectory`.
+//! Metrics per correction: `neff_x100`, `resamplings`, `particles_moved`,
+//! `bytes_moved`, `resample_us` (resampling and assignment),
+//! `imbalance_us` (slowest matcher task's correction minus the mean: seed
+//! 003's t_max − t_mean), `tiles_cloned`.
+
+use std::time::Instant;
+
+use serde::Deserialize;
+use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
+
+use crate::geometry::{Pose2, Real};
+use crate::pf::assign::{Placement, assign, loads, moved};
+use crate::pf::population::Population;
+use crate::pf::shard::SlotReport;
+use crate::pf::trajectory;
+use crate::pf_topology::messages::{Decision, Ready, Report, Settings};
+use crate::sensor::PoseStamped;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ResamplerParams {
+    #[allow(dead_code)]
+    model: String,
+}
+
+/// Reports gathered for the current reading.
+#[derive(Debug, Default)]
+struct Gathered {
+    step: u64,
+    tasks_heard: usize,
+    slots: Vec<SlotReport>,
+    busy_us: Vec<u64>,
+    update_work: u64,
+    settings: Option<Settings>,
+    mark: Option<(f64, Pose2)>,
+}
+
+/// The resampler.
+#[derive(Debug)]
+pub struct Resampler {
+    seed: u64,
+    tasks: Option<usize>,
+    population: Option<Population>,
+    settings: Option<Settings>,
+    /// The task holding each slot.
+    task_of: Vec<usize>,
+    /// Every reading's stamp and odometry, for the trajectory.
+    marks: Vec<(f64, Pose2)>,
+    gathered: Gathered,
+}
+
+impl Resampler {
+    /// Builds it (the `model` param names the model the run uses).
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let _: ResamplerParams = p.parse()?;
+        if p.parallelism() != 1 {
+            return Err(ParamError::new("pf.resampler runs as one task (it sees every weight)"));
+        }
+        Ok(Resampler {
+            seed: 0,
+            tasks: None,
+            population: None,
+            settings: None,
+            task_of: Vec::new(),
+            marks: Vec::new(),
+            gathered: Gathered::default(),
+        })
+    }
+
+    /// Counts a report from a task; `true` once every task has reported.
+    fn heard(&mut self, step: u64, task: u32, tasks: u32) -> Result<bool, BoxError> {
+        let tasks = tasks as usize;
+        if *self.tasks.get_or_insert(tasks) != tasks || task as usize >= tasks {
+            return Err(format!(
+                "pf.resampler: report from task {task} of {tasks}, expected {:?} tasks",
+                self.tasks
+            )
+            .into());
+        }
+        if self.gathered.tasks_heard > 0 && self.gathered.step != step {
+            let had = self.gathered.step;
+            return Err(format!("pf.resampler: a report for reading {step} while gathering {had}").into());
+        }
+        self.gathered.step = step;
+        self.gathered.tasks_heard += 1;
+        Ok(self.gathered.tasks_heard == tasks)
+    }
+
+    async fn emit_estimate(&self, mark: (f64, Pose2), out: &mut Emitter) -> Result<(), BoxError> {
+        let Some(p) = &self.population else { return Ok(()) };
+        let node = p.node(p.best());
+        let pose = node.pose.compose(&mark.1.relative_to(&node.odometry));
+        out.emit("pose", PoseStamped { stamp: mark.0, pose }).await?;
+        Ok(())
+    }
+
+    async fn decide(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        let g = std::mem::take(&mut self.gathered);
+        let settings = g.settings.ok_or("pf.resampler: a correction without settings")?;
+        let mark = g.mark.ok_or("pf.resampler: a correction without its reading")?;
+        self.settings = Some(settings);
+        let population = self.population.as_mut().ok_or("pf.resampler: a correction before the start")?;
+        let mut slots = g.slots;
+        slots.sort_by_key(|s| s.slot);
+        if slots.len() != population.len() || slots.iter().enumerate().any(|(i, s)| s.slot != i) {
+            return Err(format!(
+                "pf.resampler: {} slot reports for {} particles",
+                slots.len(),
+                population.len()
+            )
+            .into());
+        }
+        let started = Instant::now();
+        let poses: Vec<(Pose2, Real)> = slots.iter().map(|s| (s.pose, s.log_likelihood)).collect();
+        let d = population.correct(g.step, mark, &poses, settings.smoothing, settings.threshold);
+        let tasks = self.tasks.unwrap_or(1);
+        let task_of = if d.resampled {
+            let placements: Vec<Placement> = d
+                .parents
+                .iter()
+                .map(|&p| Placement { home: self.task_of[p], bytes: slots[p].bytes })
+                .collect();
+            let task_of = assign(&placements, tasks);
+            let m = moved(&placements, &task_of);
+            out.record("particles_moved", m.particles as u64);
+            out.record("bytes_moved", m.bytes);
+            task_of
+        } else {
+            self.task_of.clone()
+        };
+        out.record("resample_us", started.elapsed().as_micros() as u64);
+        out.record("neff_x100", (d.neff * 100.0) as u64);
+        out.count("resamplings", u64::from(d.resampled));
+        let mean = g.busy_us.iter().sum::<u64>() as f64 / g.busy_us.len().max(1) as f64;
+        let slowest = g.busy_us.iter().copied().max().unwrap_or(0);
+        out.record("imbalance_us", (slowest as f64 - mean).max(0.0) as u64);
+        let decision = Decision {
+            step: g.step,
+            parents: d.parents.iter().map(|&p| p as u32).collect(),
+            task_of: task_of.iter().map(|&t| t as u32).collect(),
+            best: d.best as u32,
+        };
+        self.task_of = task_of;
+        self.marks.push(mark);
+        out.emit("decision", decision).await?;
+        self.emit_estimate(mark, out).await
+    }
+}
+
+impl Bolt for Resampler {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<Report>()
+            .output::<Decision>("decision")
+            .output::<Ready>("ready")
+            .output::<PoseStamped>("pose")
+            .output::<PoseStamped>("trajectory");
+    }
+
+    async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        self.seed = ctx.seed();
+        Ok(())
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let report = input.get::<Report>().ok_or("pf.resampler takes matcher reports")?;
+        match report {
+            Report::Started { task, tasks, mark, pose, particles, settings } => {
+                if !self.heard(0, *task, *tasks)? {
+                    return Ok(());
+                }
+                self.gathered = Gathered::default();
+                self.settings = Some(*settings);
+                let n = *particles as usize;
+                self.population = Some(Population::start(n, self.seed, mark.0, *pose, mark.1));
+                self.task_of =
+                    loads(n, *tasks as usize).iter().enumerate().flat_map(|(t, &l)| vec![t; l]).collect();
+                self.marks.push(*mark);
+                self.emit_estimate(*mark, out).await?;
+                out.emit("ready", Ready { step: 0, corrected: true }).await?;
+            }
+            Report::Predicted { step, task, tasks, mark } => {
+                if !self.heard(*step, *task, *tasks)? {
+                    return Ok(());
+                }
+                self.gathered = Gathered::default();
+                self.marks.push(*mark);
+                self.emit_estimate(*mark, out).await?;
+                out.emit("ready", Ready { step: *step, corrected: false }).await?;
+            }
+            Report::Corrected { step, task, tasks, mark, slots, busy_us, settings } => {
+                let all = self.heard(*step, *task, *tasks)?;
+                let g = &mut self.gathered;
+                g.slots.extend_from_slice(slots);
+                g.busy_us.push(*busy_us);
+                g.settings = Some(*settings);
+                g.mark = Some(*mark);
+                if all {
+                    self.decide(out).await?;
+                }
+            }
+            Report::Updated { step, task, tasks, update_work, .. } => {
+                let all = self.heard(*step, *task, *tasks)?;
+                self.gathered.update_work += update_work;
+                if all {
+                    out.count("tiles_cloned", self.gathered.update_work);
+                    self.gathered = Gathered::default();
+                    out.emit("ready", Ready { step: *step, corrected: true }).await?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        let (Some(population), Some(settings)) = (&self.population, &self.settings) else {
+            return Ok(());
+        };
+        out.count("processed_scans", population.best_trajectory().len() as u64);
+        let poses =
+            trajectory::fill(&population.best_trajectory(), &self.marks, settings.between, settings.noise);
+        for (stamp, pose) in poses {
+            out.emit("trajectory", PoseStamped { stamp, pose }).await?;
+        }
+        Ok(())
+    }
+}
