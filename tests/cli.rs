@@ -501,3 +501,58 @@ fn slam_on_an_aces_prefix_is_the_same_for_every_matcher_count() {
     let log = shared_data("laser/aces.clf");
     assert_matchers_agree("slam-k-aces", &["--log", &log, "--max-scans", "500"]);
 }
+
+#[test]
+fn live_dispatch_drops_readings_while_the_matchers_are_busy_and_counts_each() {
+    let dir = out_dir("slam-live");
+    let out = squall(&[
+        "slam",
+        "--max-scans",
+        "500",
+        "--particles",
+        "40",
+        "--set",
+        "dispatcher.params.mode=\"live\"",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let dispatcher = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "dispatcher").unwrap();
+    let handed_out = dispatcher["emitted"].as_u64().unwrap();
+    let dropped = dispatcher["custom"]["dropped_readings"].as_u64().unwrap();
+    assert!(dropped > 0, "the source outran 40 particles, yet nothing was dropped: {dispatcher}");
+    assert_eq!(handed_out + dropped, 500, "every scan was either handed out or counted as dropped");
+    let poses = std::fs::read_to_string(dir.join("trajectory.tum")).unwrap();
+    assert_eq!(poses.lines().filter(|l| !l.starts_with('#')).count() as u64, handed_out);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn speedup_runs_every_configuration_and_writes_a_table_csv_and_plot() {
+    let dir = out_dir("speedup");
+    let args = ["speedup", "--max-scans", "300", "--particles", "6,10", "--matchers", "1,2", "--out"];
+    let out = squall(&[&args[..], &[dir.to_str().unwrap()]].concat());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    assert!(table.contains("median ms") && table.contains("efficiency"), "{table}");
+    let csv = std::fs::read_to_string(dir.join("speedup.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    for r in &rows {
+        assert!(r[2].parse::<f64>().unwrap() > 0.0, "median ms: {csv}");
+        if r[1] == "1" {
+            assert_eq!(r[3], "1.0000", "the baseline's speedup is 1: {csv}");
+        } else {
+            assert_eq!(r[8], "true", "K = 2 must reproduce K = 1: {csv}");
+        }
+    }
+    let svg = std::fs::read_to_string(dir.join("speedup.svg")).unwrap();
+    assert_eq!(svg.matches("<polyline").count(), 2, "one line per particle count");
+    assert!(svg.contains("stroke-dasharray"), "the ideal line is dashed");
+    assert!(dir.join("p10-k2/trajectory.tum").exists());
+    let out = squall(&["speedup", "--matchers", "0", "--out", dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -5,6 +5,7 @@ mod progress;
 mod run;
 mod sim;
 mod slam;
+mod speedup;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -84,6 +85,9 @@ enum Command {
     /// RBPF SLAM on a log, a bag or the simulated office; writes map.pgm,
     /// map.yaml, map.png, trajectory.tum and metrics.json.
     Slam(slam::SlamArgs),
+    /// Run SLAM for every (particles, matcher tasks) pair; print the
+    /// speedup table, write speedup.csv and speedup.svg.
+    Speedup(speedup::SpeedupArgs),
     /// Simulate a robot exploring a world; write a CARMEN log, ground truth
     /// and relations.
     Sim(sim::SimArgs),
@@ -129,6 +133,7 @@ pub(crate) fn main() -> ExitCode {
         Command::Eval(args) => eval::eval(&args),
         Command::Sim(args) => sim::sim(&args),
         Command::Slam(args) => slam::slam(&args),
+        Command::Speedup(args) => speedup::speedup(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");

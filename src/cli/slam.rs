@@ -4,42 +4,43 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use squall_topology::{Override, TopologySpec};
+use squall_topology::{Override, Topology, TopologySpec};
 
 use super::{EXIT_INVALID, report_invalid, run};
 
 const SLAM_TOML: &str = include_str!("../../examples/topologies/slam.toml");
 
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub(super) struct SlamArgs {
     /// A CARMEN log (.clf, .clf.gz) or a ROS 2 bag (folder or .mcap);
     /// without it, the simulated office.
     #[arg(long, value_name = "FILE")]
-    log: Option<PathBuf>,
+    pub(super) log: Option<PathBuf>,
     /// Particles.
     #[arg(long)]
-    particles: Option<u64>,
+    pub(super) particles: Option<u64>,
     /// Pose evaluations per particle per reading: a number or `none`.
     #[arg(long, value_name = "N|none")]
-    cutoff: Option<String>,
-    /// Matcher tasks (1 until the parallel particle filter topology lands).
+    pub(super) cutoff: Option<String>,
+    /// Matcher tasks, each holding a share of the particles (the results
+    /// do not depend on it).
     #[arg(long, default_value_t = 1)]
-    matchers: usize,
+    pub(super) matchers: usize,
     /// Stop after this many scans.
     #[arg(long)]
-    max_scans: Option<u64>,
+    pub(super) max_scans: Option<u64>,
     /// Run seed.
     #[arg(long)]
-    seed: Option<u64>,
+    pub(super) seed: Option<u64>,
     /// Another topology file instead of the built-in slam.toml.
     #[arg(long, value_name = "FILE")]
-    topology: Option<PathBuf>,
+    pub(super) topology: Option<PathBuf>,
     /// Override any value (as in `squall run`).
     #[arg(long = "set", value_name = "PATH=VALUE", value_parser = super::parse_override)]
-    overrides: Vec<Override>,
+    pub(super) overrides: Vec<Override>,
     /// Output folder.
     #[arg(long, value_name = "DIR")]
-    out: PathBuf,
+    pub(super) out: PathBuf,
 }
 
 fn quoted(s: &str) -> String {
@@ -82,20 +83,23 @@ fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
     Ok(out)
 }
 
-/// Runs `squall slam`.
-pub(super) fn slam(args: &SlamArgs) -> ExitCode {
-    let overrides = match overrides(args) {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
-        }
-    };
+/// The validated SLAM topology for `args`; errors are reported and
+/// turned into the exit code.
+pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
+    let overrides = overrides(args).map_err(|e| {
+        eprintln!("error: {e}");
+        ExitCode::from(EXIT_INVALID)
+    })?;
     let spec = match &args.topology {
         Some(file) => TopologySpec::load(file, &overrides),
         None => TopologySpec::parse_with("slam.toml (built in)", SLAM_TOML, &overrides),
     };
-    match report_invalid(spec) {
+    report_invalid(spec)
+}
+
+/// Runs `squall slam`.
+pub(super) fn slam(args: &SlamArgs) -> ExitCode {
+    match topology(args) {
         Ok(topology) => run::run(&topology, Some(args.out.clone()), false),
         Err(code) => code,
     }

@@ -40,7 +40,7 @@ pub use error::{BoxError, EmitError, ParamError};
 pub use field_hash::FieldHashError;
 pub use grouping::{Grouping, OverflowPolicy};
 pub use message::{Message, MessageType, Payload};
-pub use metrics::RunReport;
+pub use metrics::{ComponentReport, CustomMetric, RunReport, TaskReport};
 pub use params::Params;
 pub use plan::Topology;
 pub use registry::Registry;

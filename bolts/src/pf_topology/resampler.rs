@@ -7,7 +7,8 @@
 //! Metrics per correction: `neff_x100`, `resamplings`, `particles_moved`,
 //! `bytes_moved`, `resample_us` (resampling and assignment),
 //! `imbalance_us` (slowest matcher task's correction minus the mean: seed
-//! 003's t_max − t_mean), `tiles_cloned`.
+//! 003's t_max − t_mean), `tiles_cloned`, and `bytes_moved_round_robin`:
+//! what placing new slot j on task j mod K would have moved.
 
 use std::time::Instant;
 
@@ -15,7 +16,7 @@ use serde::Deserialize;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
 
 use crate::geometry::{Pose2, Real};
-use crate::pf::assign::{Placement, assign, loads, moved};
+use crate::pf::assign::{Placement, assign, loads, moved, round_robin};
 use crate::pf::population::Population;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory;
@@ -130,6 +131,10 @@ impl Resampler {
             let m = moved(&placements, &task_of);
             out.record("particles_moved", m.particles as u64);
             out.record("bytes_moved", m.bytes);
+            // What the naive placement (new slot j to task j mod K) would
+            // have moved, for comparison.
+            let naive = moved(&placements, &round_robin(placements.len(), tasks));
+            out.record("bytes_moved_round_robin", naive.bytes);
             task_of
         } else {
             self.task_of.clone()
