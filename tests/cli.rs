@@ -556,3 +556,53 @@ fn speedup_runs_every_configuration_and_writes_a_table_csv_and_plot() {
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn parfil_runs_on_the_particle_filter_topology_and_finds_the_robot() {
+    let read_tum = |path: &Path| -> Vec<(f64, f64)> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| {
+                let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+                (v[1], v[2])
+            })
+            .collect()
+    };
+    let mut last = Vec::new();
+    for k in ["1", "2"] {
+        let dir = out_dir(&format!("parfil-k{k}"));
+        let out = squall(&[
+            "run",
+            "examples/topologies/parfil.toml",
+            "--set",
+            "source.params.iterations=500",
+            "--set",
+            &format!("matcher.parallelism={k}"),
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let (estimate, truth) = (read_tum(&dir.join("trajectory.tum")), read_tum(&dir.join("truth.tum")));
+        assert_eq!((estimate.len(), truth.len()), (501, 501));
+        // Distance in the wrap-around room of 100 m × 100 m.
+        let wrapped = |a: f64, b: f64| {
+            let d = (a - b).rem_euclid(100.0);
+            d.min(100.0 - d)
+        };
+        // A uniform guess is 38 m off on average; over the last 100
+        // iterations the best lineage must track the robot.
+        let mut errors: Vec<f64> = estimate[400..]
+            .iter()
+            .zip(&truth[400..])
+            .map(|(&(ex, ey), &(tx, ty))| wrapped(ex, tx).hypot(wrapped(ey, ty)))
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        let median = errors[errors.len() / 2];
+        assert!(median < 3.0, "K = {k}: the best lineage is a median {median:.2} m from the robot");
+        last.push(estimate);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    assert!(last[0] == last[1], "K = 2 differs from K = 1");
+}

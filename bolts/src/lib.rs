@@ -8,6 +8,7 @@ pub mod eval;
 pub mod geometry;
 pub mod linemap;
 pub mod map;
+pub mod parfil;
 pub mod pf;
 pub mod pf_topology;
 pub mod sensor;

@@ -91,12 +91,15 @@ where
         let n = self.model.particles();
         let state = self.model.start(first);
         self.task_of = loads(n, self.tasks).iter().enumerate().flat_map(|(t, &l)| vec![t; l]).collect();
+        let model = &self.model;
         self.shards = (0..self.tasks)
-            .map(|t| Shard::start(t, self.seed, (0..n).filter(|&s| self.task_of[s] == t), &state))
+            .map(|t| Shard::start(model, t, self.seed, (0..n).filter(|&s| self.task_of[s] == t), &state))
             .collect();
-        let (stamp, odometry) = self.model.mark(first);
-        let pose = self.model.pose(&state);
-        self.population = Some(Population::start(n, self.seed, stamp, pose, odometry));
+        let (stamp, odometry) = model.mark(first);
+        let mut poses: Vec<(usize, Pose2)> = self.shards.iter().flat_map(|s| s.poses(model)).collect();
+        poses.sort_by_key(|p| p.0);
+        let poses: Vec<Pose2> = poses.into_iter().map(|p| p.1).collect();
+        self.population = Some(Population::start(&poses, self.seed, stamp, odometry));
         self.last = Some(first.clone());
         StepReport { neff: n as Real, ..StepReport::default() }
     }
@@ -113,6 +116,7 @@ where
             &poses,
             model.weight_smoothing(),
             model.resample_threshold(),
+            model.resampling(),
         );
         let parents = &decision.parents;
         let (task_of, moved_now) = if decision.resampled {

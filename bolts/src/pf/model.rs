@@ -5,6 +5,7 @@
 use rand_chacha::ChaCha8Rng;
 
 use crate::geometry::{Pose2, Real};
+use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 
 /// The model-specific parts of a particle filter.
@@ -30,8 +31,15 @@ pub trait ParticleModel: Send + Sync + 'static {
     /// Particles in the set.
     fn particles(&self) -> usize;
 
-    /// Every particle's state at the first reading.
+    /// The state every particle starts from at the first reading (built
+    /// once and shared: for SLAM, one map).
     fn start(&self, first: &Self::Input) -> Self::State;
+
+    /// Spreads one particle's copy of the start state, drawing from `rng`
+    /// (for global localization: a uniform pose). The default keeps it.
+    fn scatter(&self, state: &mut Self::State, rng: &mut ChaCha8Rng) {
+        let _ = (state, rng);
+    }
 
     /// The reading's stamp and odometry pose (the lineage's marks, from
     /// which every reading's pose is filled in).
@@ -77,6 +85,11 @@ pub trait ParticleModel: Send + Sync + 'static {
 
     /// Resample when Neff falls below this fraction of the particles.
     fn resample_threshold(&self) -> Real;
+
+    /// How the new set is drawn when resampling.
+    fn resampling(&self) -> Scheme {
+        Scheme::LowVariance
+    }
 
     /// How the trajectory fills in readings between corrections.
     fn between_readings(&self) -> (BetweenScans, NoiseWeights) {

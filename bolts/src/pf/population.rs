@@ -5,11 +5,8 @@
 
 use std::sync::Arc;
 
-use rand::RngExt;
-
 use crate::geometry::{Pose2, Real};
-use crate::pf::resample::{low_variance, normalize};
-use crate::pf::rng_for;
+use crate::pf::resample::{Scheme, draw, normalize};
 
 /// A pose a particle held at a correcting reading, linked to its
 /// ancestor's.
@@ -53,14 +50,14 @@ pub struct Population {
 }
 
 impl Population {
-    /// `particles` slots, all at `pose` at the first reading.
-    pub fn start(particles: usize, seed: u64, stamp: f64, pose: Pose2, odometry: Pose2) -> Self {
-        let node = Arc::new(Node { stamp, pose, odometry, parent: None });
+    /// One slot per pose, at the first reading.
+    pub fn start(poses: &[Pose2], seed: u64, stamp: f64, odometry: Pose2) -> Self {
+        let n = poses.len();
         Population {
             seed,
-            log_weights: vec![0.0; particles],
-            lineage_weights: vec![0.0; particles],
-            nodes: vec![node; particles],
+            log_weights: vec![0.0; n],
+            lineage_weights: vec![0.0; n],
+            nodes: poses.iter().map(|&pose| Arc::new(Node { stamp, pose, odometry, parent: None })).collect(),
         }
     }
 
@@ -76,8 +73,8 @@ impl Population {
 
     /// Takes the corrected reading `step` (its stamp and odometry) with
     /// each slot's refined pose and log-likelihood, in slot order: weights,
-    /// Neff, resampling below `threshold` × N (weights smoothed by
-    /// `smoothing` × N), and the lineage extended by the new poses.
+    /// Neff, resampling by `scheme` below `threshold` × N (weights smoothed
+    /// by `smoothing` × N), and the lineage extended by the new poses.
     pub fn correct(
         &mut self,
         step: u64,
@@ -85,6 +82,7 @@ impl Population {
         reports: &[(Pose2, Real)],
         smoothing: Real,
         threshold: Real,
+        scheme: Scheme,
     ) -> Decision {
         assert_eq!(reports.len(), self.len(), "one report per particle");
         for (slot, &(_, l)) in reports.iter().enumerate() {
@@ -94,12 +92,7 @@ impl Population {
         let (weights, neff) = normalize(&self.log_weights, smoothing);
         let n = self.len();
         let resampled = neff < threshold * n as Real;
-        let parents = if resampled {
-            let u = rng_for(self.seed, step, u64::MAX).random::<Real>();
-            low_variance(&weights, u)
-        } else {
-            (0..n).collect()
-        };
+        let parents = if resampled { draw(scheme, &weights, self.seed, step) } else { (0..n).collect() };
         let (stamp, odometry) = mark;
         let nodes: Vec<Arc<Node>> = parents
             .iter()
@@ -153,10 +146,10 @@ mod tests {
 
     #[test]
     fn resampling_favours_weight_and_the_lineage_follows_the_parents() {
-        let mut p = Population::start(4, 7, 0.0, at(0.0), at(0.0));
+        let mut p = Population::start(&[at(0.0); 4], 7, 0.0, at(0.0));
         let reports: Vec<(Pose2, Real)> =
             [(1.0, -900.0), (2.0, 0.0), (3.0, -900.0), (4.0, -900.0)].map(|(x, l)| (at(x), l)).to_vec();
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5);
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance);
         assert!(d.resampled && d.neff < 2.0, "{d:?}");
         assert_eq!(d.parents, vec![1, 1, 1, 1]);
         assert_eq!(d.best, 3, "equal lineage weights: the last slot");
@@ -166,13 +159,20 @@ mod tests {
 
     #[test]
     fn without_resampling_weights_accumulate_and_slots_keep_their_parents() {
-        let mut p = Population::start(3, 7, 0.0, at(0.0), at(0.0));
+        let mut p = Population::start(&[at(0.0); 3], 7, 0.0, at(0.0));
         let reports = vec![(at(1.0), -1.0), (at(2.0), -1.1), (at(3.0), -1.2)];
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5);
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance);
         assert!(!d.resampled);
         assert_eq!((d.parents, d.best), (vec![0, 1, 2], 0));
         assert_eq!(p.lineage_weight(2), -1.2);
-        let d = p.correct(2, (2.0, at(2.0)), &[(at(1.0), -5.0), (at(2.0), 0.0), (at(3.0), 0.0)], 3.0, 0.5);
+        let d = p.correct(
+            2,
+            (2.0, at(2.0)),
+            &[(at(1.0), -5.0), (at(2.0), 0.0), (at(3.0), 0.0)],
+            3.0,
+            0.5,
+            Scheme::LowVariance,
+        );
         assert_eq!(d.best, 1);
     }
 }

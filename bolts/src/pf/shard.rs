@@ -45,10 +45,29 @@ impl<M: ParticleModel> std::fmt::Debug for Shard<M> {
 }
 
 impl<M: ParticleModel> Shard<M> {
-    /// Task `task`'s shard holding `slots`, all in the state `start`.
-    pub fn start(task: usize, seed: u64, slots: impl IntoIterator<Item = usize>, start: &M::State) -> Self {
-        let held = slots.into_iter().map(|s| (s, start.clone())).collect();
+    /// Task `task`'s shard holding `slots`, each a copy of `start` spread
+    /// by the model's `scatter` with the slot's draws for reading 0.
+    pub fn start(
+        model: &M,
+        task: usize,
+        seed: u64,
+        slots: impl IntoIterator<Item = usize>,
+        start: &M::State,
+    ) -> Self {
+        let held = slots
+            .into_iter()
+            .map(|slot| {
+                let mut state = start.clone();
+                model.scatter(&mut state, &mut rng_for(seed, 0, slot as u64));
+                (slot, state)
+            })
+            .collect();
         Shard { task, seed, held, scratch: M::Scratch::default() }
+    }
+
+    /// The (slot, pose) of every particle held.
+    pub fn poses(&self, model: &M) -> Vec<(usize, Pose2)> {
+        self.held.iter().map(|(slot, s)| (*slot, model.pose(s))).collect()
     }
 
     /// This shard's task.
@@ -211,8 +230,9 @@ mod tests {
 
     #[test]
     fn a_transfer_delivers_exactly_the_parents_state() {
-        let mut shards: Vec<Shard<Walk>> =
-            (0..2).map(|t| Shard::start(t, 9, (0..6).filter(move |s| s % 2 == t), &vec![0.0])).collect();
+        let mut shards: Vec<Shard<Walk>> = (0..2)
+            .map(|t| Shard::start(&Walk, t, 9, (0..6).filter(move |s| s % 2 == t), &vec![0.0]))
+            .collect();
         for (step, shard) in shards.iter_mut().enumerate() {
             shard.predict(&Walk, step as u64 + 1, &1.0);
         }
@@ -238,7 +258,7 @@ mod tests {
 
     #[test]
     fn a_missing_transfer_is_an_error_naming_the_slot() {
-        let mut shard: Shard<Walk> = Shard::start(0, 9, [0, 1], &vec![0.0]);
+        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0]);
         let e = shard.adopt(&[0, 3], &[0, 0], Vec::new()).unwrap_err();
         assert!(e.contains("new slot 1") && e.contains("parent 3"), "{e}");
     }

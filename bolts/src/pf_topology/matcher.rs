@@ -90,6 +90,7 @@ impl<M: HostedModel> Matcher<M> {
         Settings {
             smoothing: self.model.weight_smoothing(),
             threshold: self.model.resample_threshold(),
+            scheme: self.model.resampling(),
             between,
             noise,
         }
@@ -116,12 +117,14 @@ impl<M: HostedModel> Matcher<M> {
             let state = self.model.start(&reading.input);
             let load = loads(n, self.tasks);
             let first: usize = load[..self.task].iter().sum();
-            let pose = self.model.pose(&state);
             // Equal lineage weights: the best is the last slot.
             self.best = n - 1;
-            self.shard = Some(Shard::start(self.task, self.seed, first..first + load[self.task], &state));
+            let shard =
+                Shard::start(&self.model, self.task, self.seed, first..first + load[self.task], &state);
+            let poses = shard.poses(&self.model).into_iter().map(|(slot, p)| (slot as u32, p)).collect();
+            self.shard = Some(shard);
             let (particles, settings) = (n as u32, self.settings());
-            let started = Report::Started { task, tasks, mark, pose, particles, settings };
+            let started = Report::Started { task, tasks, mark, poses, particles, settings };
             out.emit("report", started).await?;
             // The start counts as the first correction (it maps the first
             // reading).

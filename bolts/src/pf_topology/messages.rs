@@ -5,6 +5,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real};
+use crate::pf::resample::Scheme;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 
@@ -36,6 +37,8 @@ pub struct Settings {
     pub smoothing: Real,
     /// Resample below this fraction of N.
     pub threshold: Real,
+    /// How the new set is drawn.
+    pub scheme: Scheme,
     /// How the trajectory fills readings between corrections.
     pub between: BetweenScans,
     /// Odometry noise weights for that filling.
@@ -45,7 +48,7 @@ pub struct Settings {
 /// Matcher task → resampler.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Report {
-    /// The first reading started the filter: every particle at `pose`.
+    /// The first reading started the filter.
     Started {
         /// The reporting task and how many there are.
         task: u32,
@@ -53,8 +56,8 @@ pub enum Report {
         tasks: u32,
         /// The reading's stamp and odometry.
         mark: (f64, Pose2),
-        /// The particles' pose.
-        pose: Pose2,
+        /// (slot, pose) of the particles this task holds.
+        poses: Vec<(u32, Pose2)>,
         /// Particles in the set.
         particles: u32,
         /// The model's resampling settings.

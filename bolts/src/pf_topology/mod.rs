@@ -10,17 +10,23 @@
 //! holds the source back while the matchers work, the matcher tasks each
 //! hold a share of the particles and exchange parents' states as peers,
 //! the resampler owns the weights and the lineage. Every kind takes
-//! `model = "slam"` (the model the run uses).
+//! `model = "slam"` or `"parfil"` (the model the run uses).
 
 pub mod dispatcher;
 pub mod matcher;
 pub mod messages;
 pub mod resampler;
 
-use squall_topology::{Message, ParamError, Params, Registry};
+use squall_topology::{
+    Bolt, BoxError, Declarer, Emitter, Message, ParamError, Params, Registry, TaskContext, Tuple,
+};
 
+use crate::geometry::Pose2;
 use crate::map::OccupancyGrid;
+use crate::parfil::{ParfilModel, ParfilOptions, ParfilReading};
 use crate::pf::ParticleModel;
+use crate::pf_topology::dispatcher::Dispatcher;
+use crate::pf_topology::matcher::Matcher;
 use crate::sensor::LaserReading;
 use crate::slam::model::{SlamModel, SlamParticle};
 use crate::slam::options::SlamOptions;
@@ -55,30 +61,93 @@ impl HostedModel for SlamModel {
     }
 }
 
-/// The models the kinds know, by their `model` name.
-const MODELS: &[&str] = &["slam"];
+impl HostedModel for ParfilModel {
+    type Snapshot = Pose2;
 
-fn model_of(p: &Params) -> Result<String, ParamError> {
+    fn from_table(table: toml::Table) -> Result<Self, String> {
+        let options: ParfilOptions = toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| e.to_string().trim().to_string())?;
+        ParfilModel::new(options)
+    }
+
+    fn snapshot(&self, state: &Pose2) -> Pose2 {
+        *state
+    }
+}
+
+/// The models the kinds know, by their `model` name.
+const MODELS: &[&str] = &["slam", "parfil"];
+
+fn model_of(p: &Params) -> Result<&str, ParamError> {
     let name = p
         .table()
         .get("model")
         .and_then(|v| v.as_str())
         .ok_or_else(|| ParamError::new(format!("`model` is required: one of {}", MODELS.join(", "))))?;
-    if !MODELS.contains(&name) {
-        return Err(ParamError::new(format!("unknown model \"{name}\": one of {}", MODELS.join(", "))));
-    }
-    Ok(name.to_string())
+    MODELS
+        .iter()
+        .find(|&&m| m == name)
+        .copied()
+        .ok_or_else(|| ParamError::new(format!("unknown model \"{name}\": one of {}", MODELS.join(", "))))
 }
+
+/// One bolt type per kind whatever the model: each variant is the kind for
+/// one model, chosen by the `model` param.
+macro_rules! per_model {
+    ($(#[$doc:meta])* $name:ident { $($variant:ident($inner:ty)),+ $(,)? }) => {
+        $(#[$doc])*
+        #[derive(Debug)]
+        pub enum $name {
+            $(
+                #[allow(missing_docs)]
+                $variant(Box<$inner>),
+            )+
+        }
+
+        impl Bolt for $name {
+            fn declare(&self, d: &mut Declarer) {
+                match self { $($name::$variant(b) => b.declare(d),)+ }
+            }
+
+            async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+                match self { $($name::$variant(b) => b.prepare(ctx).await,)+ }
+            }
+
+            async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+                match self { $($name::$variant(b) => b.execute(input, out).await,)+ }
+            }
+
+            async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+                match self { $($name::$variant(b) => b.finish(out).await,)+ }
+            }
+        }
+    };
+}
+
+per_model!(
+    /// `pf.dispatcher` for the run's model.
+    AnyDispatcher { Slam(Dispatcher<LaserReading>), Parfil(Dispatcher<ParfilReading>) }
+);
+
+per_model!(
+    /// `pf.matcher` for the run's model.
+    AnyMatcher { Slam(Matcher<SlamModel>), Parfil(Matcher<ParfilModel>) }
+);
 
 /// Registers `pf.dispatcher`, `pf.matcher` and `pf.resampler`.
 pub fn register(r: &mut Registry) {
     r.register_bolt("pf.dispatcher", |p: &Params| {
-        model_of(p)?;
-        dispatcher::Dispatcher::<LaserReading>::from_params(p)
+        Ok(match model_of(p)? {
+            "slam" => AnyDispatcher::Slam(Box::new(Dispatcher::from_params(p)?)),
+            _ => AnyDispatcher::Parfil(Box::new(Dispatcher::from_params(p)?)),
+        })
     });
     r.register_bolt("pf.matcher", |p: &Params| {
-        model_of(p)?;
-        matcher::Matcher::<SlamModel>::from_params(p)
+        Ok(match model_of(p)? {
+            "slam" => AnyMatcher::Slam(Box::new(Matcher::from_params(p)?)),
+            _ => AnyMatcher::Parfil(Box::new(Matcher::from_params(p)?)),
+        })
     });
     r.register_bolt("pf.resampler", |p: &Params| {
         model_of(p)?;

@@ -40,6 +40,8 @@ struct Gathered {
     update_work: u64,
     settings: Option<Settings>,
     mark: Option<(f64, Pose2)>,
+    /// (slot, pose) at the start.
+    starts: Vec<(usize, Pose2)>,
 }
 
 /// The resampler.
@@ -119,7 +121,8 @@ impl Resampler {
         }
         let started = Instant::now();
         let poses: Vec<(Pose2, Real)> = slots.iter().map(|s| (s.pose, s.log_likelihood)).collect();
-        let d = population.correct(g.step, mark, &poses, settings.smoothing, settings.threshold);
+        let d =
+            population.correct(g.step, mark, &poses, settings.smoothing, settings.threshold, settings.scheme);
         let tasks = self.tasks.unwrap_or(1);
         let task_of = if d.resampled {
             let placements: Vec<Placement> = d
@@ -175,14 +178,22 @@ impl Bolt for Resampler {
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         let report = input.get::<Report>().ok_or("pf.resampler takes matcher reports")?;
         match report {
-            Report::Started { task, tasks, mark, pose, particles, settings } => {
+            Report::Started { task, tasks, mark, poses, particles, settings } => {
+                self.gathered.starts.extend(poses.iter().map(|&(slot, p)| (slot as usize, p)));
                 if !self.heard(0, *task, *tasks)? {
                     return Ok(());
                 }
-                self.gathered = Gathered::default();
-                self.settings = Some(*settings);
+                let mut starts = std::mem::take(&mut self.gathered).starts;
+                starts.sort_by_key(|s| s.0);
                 let n = *particles as usize;
-                self.population = Some(Population::start(n, self.seed, mark.0, *pose, mark.1));
+                if starts.len() != n || starts.iter().enumerate().any(|(i, s)| s.0 != i) {
+                    return Err(
+                        format!("pf.resampler: {} start poses for {n} particles", starts.len()).into()
+                    );
+                }
+                self.settings = Some(*settings);
+                let poses: Vec<Pose2> = starts.into_iter().map(|s| s.1).collect();
+                self.population = Some(Population::start(&poses, self.seed, mark.0, mark.1));
                 self.task_of =
                     loads(n, *tasks as usize).iter().enumerate().flat_map(|(t, &l)| vec![t; l]).collect();
                 self.marks.push(*mark);

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::pf::model::{Correction, ParticleModel};
+use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 use crate::sensor::LaserReading;
 use crate::slam::grid::{TILE_BYTES, TiledGrid};
@@ -143,6 +144,10 @@ impl ParticleModel for SlamModel {
 
     fn resample_threshold(&self) -> Real {
         self.options.resample_threshold
+    }
+
+    fn resampling(&self) -> Scheme {
+        self.options.resampling
     }
 
     fn between_readings(&self) -> (BetweenScans, NoiseWeights) {

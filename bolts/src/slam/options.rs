@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::Real;
+pub use crate::pf::resample::Scheme;
 pub use crate::pf::trajectory::BetweenScans;
 
 /// A limit on pose evaluations per particle per reading (seed 003's
@@ -115,6 +116,9 @@ pub struct SlamOptions {
     /// it, `"odometry"` composes the last corrected pose with odometry (as
     /// GMapping reports). The default is `"interpolate"`.
     pub between_scans: BetweenScans,
+    /// How the new set is drawn: `"low_variance"` (GMapping's, the
+    /// default), `"ring"` (the thesis's sparse graph) or `"aggregation"`.
+    pub resampling: Scheme,
 }
 
 impl Default for SlamOptions {
@@ -145,6 +149,7 @@ impl Default for SlamOptions {
             wide_search_turn: 0.15,
             wide_search_margin: 1.2,
             between_scans: BetweenScans::Interpolate,
+            resampling: Scheme::LowVariance,
         }
     }
 }
