@@ -7,7 +7,8 @@
 //! particle emits its snapshot (the map, for SLAM) every `map_interval`
 //! corrections and at the end.
 //! Metrics: `evaluations_per_particle`, `correct_us`, `update_us`,
-//! `particles_received`.
+//! `particles_received`, and at the end `map_bytes` (the task's particles'
+//! memory, shared tiles counted once).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -255,6 +256,10 @@ impl<M: HostedModel> Bolt for Matcher<M> {
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         if self.pending.is_some() || !self.queued.is_empty() {
             return Err("pf.matcher: the run ended with a reading unfinished".into());
+        }
+        if let Some(shard) = &self.shard {
+            // This task's particles' memory, shared map tiles counted once.
+            out.count("map_bytes", self.model.memory(shard.held().iter().map(|(_, s)| s)));
         }
         self.emit_snapshot(out).await
     }

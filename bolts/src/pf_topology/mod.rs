@@ -28,6 +28,7 @@ use crate::pf::ParticleModel;
 use crate::pf_topology::dispatcher::Dispatcher;
 use crate::pf_topology::matcher::Matcher;
 use crate::sensor::LaserReading;
+use crate::slam::grid::TiledGrid;
 use crate::slam::model::{SlamModel, SlamParticle};
 use crate::slam::options::SlamOptions;
 
@@ -44,6 +45,14 @@ pub trait HostedModel: ParticleModel<Input: Message, State: Message> + Sized {
 
     /// The snapshot of a particle.
     fn snapshot(&self, state: &Self::State) -> Self::Snapshot;
+
+    /// Bytes the states take together (shared parts counted once).
+    fn memory<'a>(&self, states: impl Iterator<Item = &'a Self::State>) -> u64
+    where
+        Self::State: 'a,
+    {
+        states.map(|s| self.state_bytes(s)).sum()
+    }
 }
 
 impl HostedModel for SlamModel {
@@ -58,6 +67,10 @@ impl HostedModel for SlamModel {
 
     fn snapshot(&self, state: &SlamParticle) -> OccupancyGrid {
         state.map.to_occupancy()
+    }
+
+    fn memory<'a>(&self, states: impl Iterator<Item = &'a SlamParticle>) -> u64 {
+        TiledGrid::distinct_tiles(states.map(|s| &s.map)).1 as u64
     }
 }
 
