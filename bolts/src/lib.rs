@@ -4,6 +4,7 @@
 //! The algorithm modules never touch the runtime: they take values and
 //! return values, so they can be tested, benchmarked and reused alone.
 
+pub mod cgr;
 pub mod eval;
 pub mod geometry;
 pub mod linemap;

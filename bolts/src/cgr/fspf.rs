@@ -1,0 +1,365 @@
+//! Fast Sampling Plane Filtering (Biswas & Veloso 2011; thesis Alg. 4.2):
+//! samples pixel neighbourhoods of a depth image, fits a plane to three
+//! points of each, and keeps the neighbourhood's points that a local
+//! RANSAC check finds on that plane, with its normal. Walls, floor and
+//! ceiling survive; clutter and people mostly do not. The output buffers
+//! are reused from frame to frame, so filtering allocates nothing once
+//! warm.
+
+use std::path::Path;
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::geometry::Real;
+use crate::textfile::TextFileError;
+
+/// A pinhole camera: focal lengths and principal point, pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    /// Horizontal focal length.
+    pub fx: Real,
+    /// Vertical focal length.
+    pub fy: Real,
+    /// Principal point, column.
+    pub cx: Real,
+    /// Principal point, row.
+    pub cy: Real,
+}
+
+impl Intrinsics {
+    /// The RealSense D435 depth stream aligned to colour, 640 × 480 (the
+    /// shared data's frames).
+    pub const D435: Intrinsics = Intrinsics { fx: 615.0, fy: 615.0, cx: 320.0, cy: 240.0 };
+}
+
+/// A 16-bit depth image in millimetres (0: no data), row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthImage {
+    /// Pixels per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Depth per pixel, millimetres.
+    pub depth_mm: Vec<u16>,
+}
+
+impl DepthImage {
+    /// Reads a 16-bit greyscale PNG (millimetres).
+    pub fn load_png(path: &Path) -> Result<Self, TextFileError> {
+        let name = path.display().to_string();
+        let bad = |message: String| TextFileError::Bad { path: name.clone(), line: 0, message };
+        let file = std::fs::File::open(path).map_err(|e| bad(format!("cannot open: {e}")))?;
+        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+            .read_info()
+            .map_err(|e| bad(format!("not a PNG: {e}")))?;
+        let info = reader.info();
+        if info.bit_depth != png::BitDepth::Sixteen || info.color_type != png::ColorType::Grayscale {
+            return Err(bad(format!(
+                "expected a 16-bit greyscale depth image, found {:?} {:?}",
+                info.bit_depth, info.color_type
+            )));
+        }
+        let (width, height) = (info.width as usize, info.height as usize);
+        let mut buf = vec![0; reader.output_buffer_size().ok_or_else(|| bad("image too large".into()))?];
+        reader.next_frame(&mut buf).map_err(|e| bad(format!("cannot decode: {e}")))?;
+        let depth_mm =
+            buf.chunks_exact(2).take(width * height).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
+        Ok(DepthImage { width, height, depth_mm })
+    }
+
+    /// The camera-frame point of pixel (`row`, `col`) (x right, y down,
+    /// z forward, metres), if it has depth.
+    #[inline]
+    pub fn point(&self, row: usize, col: usize, k: &Intrinsics) -> Option<[f32; 3]> {
+        let d = self.depth_mm[row * self.width + col];
+        (d != 0).then(|| {
+            let z = f32::from(d) * 1e-3;
+            [((col as Real - k.cx) / k.fx) as f32 * z, ((row as Real - k.cy) / k.fy) as f32 * z, z]
+        })
+    }
+}
+
+/// FSPF settings; `Default` gives Biswas & Veloso's.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FspfOptions {
+    /// n_max: plane points to extract. The default is 2000.
+    pub max_points: usize,
+    /// k_max: neighbourhoods to try. The default is 20000.
+    pub max_iterations: usize,
+    /// l: pixels sampled per neighbourhood by the local RANSAC check. The
+    /// default is 80.
+    pub local_samples: usize,
+    /// η: how far (pixels) the second and third points lie from the first.
+    /// The default is 60.
+    pub neighbourhood: i64,
+    /// S: the neighbourhood's size in the world, metres. The default is
+    /// 0.5.
+    pub plane_size: Real,
+    /// ε: distance from the plane that counts as on it, metres. The
+    /// default is 0.02.
+    pub tolerance: Real,
+    /// α: fraction of the local samples that must be on the plane. The
+    /// default is 0.8.
+    pub min_inlier_fraction: Real,
+}
+
+impl Default for FspfOptions {
+    fn default() -> Self {
+        FspfOptions {
+            max_points: 2000,
+            max_iterations: 20000,
+            local_samples: 80,
+            neighbourhood: 60,
+            plane_size: 0.5,
+            tolerance: 0.02,
+            min_inlier_fraction: 0.8,
+        }
+    }
+}
+
+/// FSPF's output: plane points with their planes' normals (facing the
+/// camera), and the points of rejected neighbourhoods.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PlaneFiltered {
+    /// Points on planes, camera frame, metres.
+    pub points: Vec<[f32; 3]>,
+    /// The unit normal of each point's plane.
+    pub normals: Vec<[f32; 3]>,
+    /// Points of neighbourhoods that were not planar.
+    pub outliers: Vec<[f32; 3]>,
+    /// Neighbourhoods tried.
+    pub iterations: usize,
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// A uniform integer in `lo..=hi` from 32 random bits (multiply-shift:
+/// the bias is below (hi − lo + 1) / 2³², nothing for pixel offsets).
+#[inline(always)]
+fn pick(bits: u32, lo: i64, hi: i64) -> i64 {
+    lo + ((u64::from(bits) * (hi - lo + 1) as u64) >> 32) as i64
+}
+
+/// FSPF with its per-camera tables and scratch, reused from frame to
+/// frame.
+#[derive(Debug, Clone)]
+pub struct PlaneFilter {
+    options: FspfOptions,
+    camera: Intrinsics,
+    /// (col − cx) / fx per column and (row − cy) / fy per row.
+    col_factor: Vec<f32>,
+    row_factor: Vec<f32>,
+    inliers: Vec<[f32; 3]>,
+}
+
+impl PlaneFilter {
+    /// A filter for images from `camera`.
+    pub fn new(options: FspfOptions, camera: Intrinsics) -> Self {
+        PlaneFilter { options, camera, col_factor: Vec::new(), row_factor: Vec::new(), inliers: Vec::new() }
+    }
+
+    /// Filters `image` into `out` (cleared first), drawing from `rng`.
+    pub fn filter(&mut self, image: &DepthImage, rng: &mut ChaCha8Rng, out: &mut PlaneFiltered) {
+        out.points.clear();
+        out.normals.clear();
+        out.outliers.clear();
+        out.iterations = 0;
+        let (w, h) = (image.width as i64, image.height as i64);
+        if w == 0 || h == 0 {
+            return;
+        }
+        let (o, k) = (&self.options, self.camera);
+        if self.col_factor.len() != image.width || self.row_factor.len() != image.height {
+            self.col_factor = (0..image.width).map(|c| ((c as Real - k.cx) / k.fx) as f32).collect();
+            self.row_factor = (0..image.height).map(|r| ((r as Real - k.cy) / k.fy) as f32).collect();
+        }
+        let (cols, rows) = (&self.col_factor, &self.row_factor);
+        let at = |r: i64, c: i64| -> Option<[f32; 3]> {
+            let d = image.depth_mm[r as usize * image.width + c as usize];
+            (d != 0).then(|| {
+                let z = f32::from(d) * 1e-3;
+                [cols[c as usize] * z, rows[r as usize] * z, z]
+            })
+        };
+        let eta = o.neighbourhood.max(1);
+        let samples = o.local_samples;
+        let need = (o.min_inlier_fraction * samples as Real) as usize;
+        // More misses than this and the neighbourhood cannot pass.
+        let max_misses = samples - need.min(samples);
+        let tolerance = o.tolerance as f32;
+        let inliers = &mut self.inliers;
+        while out.points.len() < o.max_points && out.iterations < o.max_iterations {
+            out.iterations += 1;
+            let (a, b, c) = (rng.next_u64(), rng.next_u64(), rng.next_u64());
+            let (r0, c0) = (pick(a as u32, 0, h - 1), pick((a >> 32) as u32, 0, w - 1));
+            let (r1, c1) = (r0 + pick(b as u32, -eta, eta), c0 + pick((b >> 32) as u32, -eta, eta));
+            let (r2, c2) = (r0 + pick(c as u32, -eta, eta), c0 + pick((c >> 32) as u32, -eta, eta));
+            if r1 < 0 || r1 >= h || r2 < 0 || r2 >= h || c1 < 0 || c1 >= w || c2 < 0 || c2 >= w {
+                continue;
+            }
+            let (Some(p0), Some(p1), Some(p2)) = (at(r0, c0), at(r1, c1), at(r2, c2)) else { continue };
+            let n = cross(sub(p1, p0), sub(p2, p0));
+            let norm = dot(n, n).sqrt();
+            if norm < 1e-9 {
+                continue;
+            }
+            // Facing the camera.
+            let scale = if dot(n, p0) > 0.0 { -1.0 / norm } else { 1.0 / norm };
+            let n = [scale * n[0], scale * n[1], scale * n[2]];
+            let offset = dot(n, p0);
+            let z = Real::from(p0[2] + p1[2] + p2[2]) / 3.0;
+            // The window S metres wide at depth z, in pixels (half sizes).
+            let half_w = ((o.plane_size * k.fx / z) * 0.5).max(1.0) as i64;
+            let half_h = ((o.plane_size * k.fy / z) * 0.5).max(1.0) as i64;
+            // Branch-free test: every sample is written at the end of the
+            // buffer and kept (by advancing the count) only if it is on
+            // the plane; only the rare early exit branches.
+            if inliers.len() != samples {
+                inliers.resize(samples, [0.0; 3]);
+            }
+            let (mut kept, mut misses) = (0, 0);
+            for _ in 0..samples {
+                let bits = rng.next_u64();
+                let r = (r0 + pick(bits as u32, -half_h, half_h)).clamp(0, h - 1) as usize;
+                let c = (c0 + pick((bits >> 32) as u32, -half_w, half_w)).clamp(0, w - 1) as usize;
+                let d = image.depth_mm[r * image.width + c];
+                let z = f32::from(d) * 1e-3;
+                let p = [cols[c] * z, rows[r] * z, z];
+                let on = (d != 0) & ((dot(p, n) - offset).abs() < tolerance);
+                inliers[kept] = p;
+                kept += usize::from(on);
+                misses += usize::from(!on);
+                if misses > max_misses {
+                    break;
+                }
+            }
+            let inliers = &inliers[..kept];
+            if kept > need {
+                out.points.extend_from_slice(inliers);
+                out.normals.extend(std::iter::repeat_n(n, kept));
+            } else {
+                out.outliers.extend_from_slice(inliers);
+            }
+        }
+    }
+}
+
+/// Filters `image` into `out` (cleared first), drawing from `rng` (a
+/// one-off [`PlaneFilter`]; keep one to filter a stream).
+pub fn fspf(
+    image: &DepthImage,
+    k: &Intrinsics,
+    o: &FspfOptions,
+    rng: &mut ChaCha8Rng,
+    out: &mut PlaneFiltered,
+) {
+    PlaneFilter::new(o.clone(), *k).filter(image, rng, out);
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::SeedableRng;
+
+    use super::*;
+
+    /// A camera 1.2 m above the floor looking along +z into a box room
+    /// (floor y = 1.2, side walls x = ±2, back wall z = 4, camera frame: y
+    /// down) with a ball of radius 0.3 m at (0.3, 0.6, 2.0).
+    fn box_room() -> DepthImage {
+        let k = Intrinsics::D435;
+        let (w, h) = (640, 480);
+        let mut depth_mm = vec![0u16; w * h];
+        let ball = ([0.3f64, 0.6, 2.0], 0.3f64);
+        for row in 0..h {
+            for col in 0..w {
+                let d = [(col as f64 - k.cx) / k.fx, (row as f64 - k.cy) / k.fy, 1.0];
+                // Distance along z to each plane (rays have d.z = 1).
+                let mut z = 4.0f64;
+                if d[1] > 0.0 {
+                    z = z.min(1.2 / d[1]);
+                }
+                if d[0].abs() > 0.0 {
+                    z = z.min(2.0 / d[0].abs());
+                }
+                // The ball: |t d − c|² = r².
+                let (c, r) = ball;
+                let dd = d.iter().map(|x| x * x).sum::<f64>();
+                let dc = d.iter().zip(c).map(|(a, b)| a * b).sum::<f64>();
+                let cc = c.iter().map(|x| x * x).sum::<f64>();
+                let disc = dc * dc - dd * (cc - r * r);
+                if disc >= 0.0 {
+                    let t = (dc - disc.sqrt()) / dd;
+                    z = z.min(t);
+                }
+                depth_mm[row * w + col] = (z * 1000.0).round() as u16;
+            }
+        }
+        DepthImage { width: w, height: h, depth_mm }
+    }
+
+    #[test]
+    fn the_planes_of_a_box_room_survive_and_the_ball_does_not() {
+        let image = box_room();
+        let mut out = PlaneFiltered::default();
+        fspf(&image, &Intrinsics::D435, &FspfOptions::default(), &mut ChaCha8Rng::seed_from_u64(1), &mut out);
+        assert!(out.points.len() >= 2000, "{} points", out.points.len());
+        let on_ball = |p: &[f32; 3]| {
+            let d = [p[0] - 0.3, p[1] - 0.6, p[2] - 2.0];
+            (dot(d, d).sqrt() - 0.3).abs() < 0.01
+        };
+        let ball_points = out.points.iter().filter(|p| on_ball(p)).count();
+        assert!(
+            ball_points * 100 < out.points.len(),
+            "{ball_points} of {} points on the ball",
+            out.points.len()
+        );
+        // Each point lies on a room plane and carries that plane's normal.
+        for (p, n) in out.points.iter().zip(&out.normals) {
+            let fits = [
+                (1, 1.2f32, [0.0, -1.0, 0.0]),
+                (0, 2.0, [-1.0, 0.0, 0.0]),
+                (0, -2.0, [1.0, 0.0, 0.0]),
+                (2, 4.0, [0.0, 0.0, -1.0]),
+            ]
+            .iter()
+            .any(|&(axis, at, normal): &(usize, f32, [f32; 3])| {
+                (p[axis] - at).abs() < 0.02 && dot(*n, normal) > 0.95
+            });
+            assert!(fits || on_ball(p), "{p:?} with normal {n:?} is on no wall");
+        }
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_points_and_an_empty_image_gives_none() {
+        let image = box_room();
+        let run = |seed| {
+            let mut out = PlaneFiltered::default();
+            fspf(
+                &image,
+                &Intrinsics::D435,
+                &FspfOptions::default(),
+                &mut ChaCha8Rng::seed_from_u64(seed),
+                &mut out,
+            );
+            out
+        };
+        assert_eq!(run(5), run(5));
+        let empty = DepthImage { width: 64, height: 48, depth_mm: vec![0; 64 * 48] };
+        let mut out = PlaneFiltered::default();
+        let o = FspfOptions { max_iterations: 500, ..FspfOptions::default() };
+        fspf(&empty, &Intrinsics::D435, &o, &mut ChaCha8Rng::seed_from_u64(1), &mut out);
+        assert_eq!((out.points.len(), out.iterations), (0, 500));
+    }
+}

@@ -1,0 +1,220 @@
+//! Observable scenes precomputed on a grid (thesis §4.2.2, Fig. 6.4): for
+//! every cell centre, the walls visible from there; localization then looks
+//! the scene up instead of ray casting per particle. Built in parallel and
+//! cached to a file named by a hash of the map and the grid settings.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::cgr::scene::observable_scene;
+use crate::geometry::Real;
+use crate::linemap::LineMap;
+
+/// Bumped whenever the file layout or the scene algorithm changes.
+const FORMAT: u64 = 1;
+
+/// Why a cached grid could not be used or written.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneCacheError {
+    /// The cache file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        source: std::io::Error,
+    },
+}
+
+/// Visible walls for every cell of a grid over the map.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneGrid {
+    key: u64,
+    origin: (Real, Real),
+    cell: Real,
+    range: Real,
+    width: usize,
+    height: usize,
+    /// Cell i's walls are `lines[offsets[i]..offsets[i + 1]]`.
+    offsets: Vec<u32>,
+    lines: Vec<u32>,
+}
+
+impl SceneGrid {
+    /// Computes the scene at every cell centre of a `cell`-metre grid over
+    /// the map's bounding box, walls up to `range` metres, on `threads`
+    /// threads.
+    pub fn build(map: &LineMap, cell: Real, range: Real, threads: usize) -> Self {
+        assert!(cell > 0.0 && range > 0.0, "cell size and range must be positive");
+        let (x0, y0, x1, y1) = map.bounds();
+        let width = (((x1 - x0) / cell).ceil() as usize).max(1);
+        let height = (((y1 - y0) / cell).ceil() as usize).max(1);
+        let threads = threads.clamp(1, height);
+        let rows_per = height.div_ceil(threads);
+        let row_scenes = |rows: std::ops::Range<usize>| -> Vec<Vec<u32>> {
+            let mut out = Vec::with_capacity(rows.len() * width);
+            for j in rows {
+                for i in 0..width {
+                    let centre = (x0 + (i as Real + 0.5) * cell, y0 + (j as Real + 0.5) * cell);
+                    let mut ids: Vec<u32> =
+                        observable_scene(map, centre, range).iter().map(|v| v.line).collect();
+                    ids.sort_unstable();
+                    ids.dedup();
+                    out.push(ids);
+                }
+            }
+            out
+        };
+        let chunks: Vec<Vec<Vec<u32>>> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads)
+                .map(|t| {
+                    let rows = (t * rows_per).min(height)..((t + 1) * rows_per).min(height);
+                    s.spawn(move || row_scenes(rows))
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("a scene thread panicked")).collect()
+        });
+        let mut offsets = Vec::with_capacity(width * height + 1);
+        let mut lines = Vec::new();
+        offsets.push(0);
+        for ids in chunks.into_iter().flatten() {
+            lines.extend(ids);
+            offsets.push(lines.len() as u32);
+        }
+        SceneGrid {
+            key: Self::key(map, cell, range),
+            origin: (x0, y0),
+            cell,
+            range,
+            width,
+            height,
+            offsets,
+            lines,
+        }
+    }
+
+    /// A hash of the map and the grid settings, stable across runs and
+    /// builds (FNV-1a over the numbers' bits).
+    pub fn key(map: &LineMap, cell: Real, range: Real) -> u64 {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |v: u64| {
+            for byte in v.to_le_bytes() {
+                h ^= u64::from(byte);
+                h = h.wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        };
+        eat(FORMAT);
+        eat(cell.to_bits());
+        eat(range.to_bits());
+        for w in &map.walls {
+            for v in [w.a.0, w.a.1, w.b.0, w.b.1] {
+                eat(v.to_bits());
+            }
+        }
+        h
+    }
+
+    /// The cache file for these settings in `dir`.
+    pub fn cache_path(dir: &Path, map: &LineMap, cell: Real, range: Real) -> PathBuf {
+        dir.join(format!("scenes-{:016x}.bin", Self::key(map, cell, range)))
+    }
+
+    /// The grid from the cache in `dir` if it holds one for this map and
+    /// these settings (a damaged or stale file is rebuilt), else built and
+    /// written there (atomically). Returns whether it was built.
+    pub fn load_or_build(
+        map: &LineMap,
+        cell: Real,
+        range: Real,
+        threads: usize,
+        dir: &Path,
+    ) -> Result<(Self, bool), SceneCacheError> {
+        let path = Self::cache_path(dir, map, cell, range);
+        if let Ok(bytes) = std::fs::read(&path) {
+            if let Ok(grid) = postcard::from_bytes::<SceneGrid>(&bytes) {
+                if grid.key == Self::key(map, cell, range)
+                    && grid.offsets.len() == grid.width * grid.height + 1
+                {
+                    return Ok((grid, false));
+                }
+            }
+            tracing::warn!("{}: not a usable scene cache; rebuilding it", path.display());
+        }
+        let grid = Self::build(map, cell, range, threads);
+        let bytes = postcard::to_allocvec(&grid).expect("a scene grid serializes");
+        let io = |source| SceneCacheError::Io { path: path.clone(), source };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        squall_topology::fsio::write_atomic(&path, &bytes).map_err(io)?;
+        Ok((grid, true))
+    }
+
+    /// The walls visible from the cell containing (`x`, `y`); `None`
+    /// outside the grid.
+    pub fn lines_at(&self, x: Real, y: Real) -> Option<&[u32]> {
+        let i = ((x - self.origin.0) / self.cell).floor();
+        let j = ((y - self.origin.1) / self.cell).floor();
+        if i < 0.0 || j < 0.0 || i >= self.width as Real || j >= self.height as Real {
+            return None;
+        }
+        let c = j as usize * self.width + i as usize;
+        Some(&self.lines[self.offsets[c] as usize..self.offsets[c + 1] as usize])
+    }
+
+    /// Cells wide and high.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Wall ids stored in all (the grid's memory is about 4 bytes each).
+    pub fn entries(&self) -> usize {
+        self.lines.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn room() -> LineMap {
+        LineMap::parse("room", "0,0,10,0\n10,0,10,10\n10,10,0,10\n0,10,0,0\n4,6,6,6\n").unwrap()
+    }
+
+    #[test]
+    fn the_grid_holds_each_cells_scene() {
+        let map = room();
+        let grid = SceneGrid::build(&map, 0.5, 20.0, 2);
+        assert_eq!(grid.size(), (20, 20));
+        for (x, y) in [(5.0, 2.0), (1.2, 8.7), (5.1, 8.0), (9.9, 0.1)] {
+            let i = (x / 0.5_f64).floor();
+            let j = (y / 0.5_f64).floor();
+            let centre = ((i + 0.5) * 0.5, (j + 0.5) * 0.5);
+            let mut want: Vec<u32> = observable_scene(&map, centre, 20.0).iter().map(|v| v.line).collect();
+            want.sort_unstable();
+            want.dedup();
+            assert_eq!(grid.lines_at(x, y).unwrap(), &want[..], "at ({x}, {y})");
+        }
+        // Above the pillar the bottom wall is partly hidden but visible;
+        // every wall is seen from somewhere.
+        assert_eq!(grid.lines_at(5.0, 8.0).unwrap(), &[0, 1, 2, 3, 4]);
+        assert_eq!(grid.lines_at(-1.0, 5.0), None);
+        assert_eq!(SceneGrid::build(&map, 0.5, 20.0, 1), grid, "threads do not change the grid");
+    }
+
+    #[test]
+    fn the_cache_is_written_once_and_keyed_by_the_map() {
+        let dir = tempfile::tempdir().unwrap();
+        let map = room();
+        let (built, fresh) = SceneGrid::load_or_build(&map, 1.0, 8.0, 2, dir.path()).unwrap();
+        assert!(fresh);
+        let (loaded, fresh) = SceneGrid::load_or_build(&map, 1.0, 8.0, 2, dir.path()).unwrap();
+        assert!(!fresh && loaded == built);
+        let mut moved = map.clone();
+        moved.walls[4].a.0 = 3.0;
+        assert_ne!(SceneGrid::key(&moved, 1.0, 8.0), SceneGrid::key(&map, 1.0, 8.0));
+        let path = SceneGrid::cache_path(dir.path(), &map, 1.0, 8.0);
+        std::fs::write(&path, b"garbage").unwrap();
+        let (rebuilt, fresh) = SceneGrid::load_or_build(&map, 1.0, 8.0, 2, dir.path()).unwrap();
+        assert!(fresh && rebuilt == built, "a damaged cache is rebuilt");
+    }
+}
