@@ -109,7 +109,7 @@ impl ParticleModel for SlamModel {
     }
 
     fn predict(&self, p: &mut SlamParticle, step: &OdometryStep, rng: &mut ChaCha8Rng) {
-        p.pose = sample_motion(&p.pose, &step.from, &step.to, &self.options, rng);
+        p.pose = sample_motion(&p.pose, &step.from, &step.to, &self.options.motion_noise(), rng);
     }
 
     fn prepare(&self, input: &LaserReading, scratch: &mut SlamScratch) {

@@ -5,8 +5,26 @@
 
 use rand::Rng;
 
-use crate::geometry::{Pose2, normalize_angle};
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{Pose2, Real, normalize_angle};
+#[cfg(test)]
 use crate::slam::options::SlamOptions;
+
+/// The motion model's noise: how much translation and rotation error one
+/// metre of travel and one radian of turning add (GMapping's srr, srt, str,
+/// stt).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MotionNoise {
+    /// Translation noise per metre of translation.
+    pub srr: Real,
+    /// Rotation noise per metre of translation.
+    pub srt: Real,
+    /// Translation noise per radian of rotation.
+    pub str: Real,
+    /// Rotation noise per radian of rotation.
+    pub stt: Real,
+}
 
 /// A standard normal sample (Box–Muller).
 pub fn standard_normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
@@ -21,7 +39,7 @@ pub fn sample_motion<R: Rng + ?Sized>(
     pose: &Pose2,
     old: &Pose2,
     new: &Pose2,
-    o: &SlamOptions,
+    o: &MotionNoise,
     rng: &mut R,
 ) -> Pose2 {
     let d = new.relative_to(old);
@@ -39,7 +57,7 @@ mod tests {
 
     #[test]
     fn samples_have_the_model_mean_and_spread() {
-        let o = SlamOptions::default();
+        let o = SlamOptions::default().motion_noise();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         let (old, new) =
             (Pose2::new(2.0, 1.0, 0.5), Pose2::new(2.0, 1.0, 0.5).compose(&Pose2::new(1.0, 0.0, 0.2)));
@@ -64,7 +82,7 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
         let p = Pose2::new(1.0, 2.0, 3.0);
         let o = Pose2::new(5.0, 5.0, 0.1);
-        let moved = sample_motion(&p, &o, &o, &SlamOptions::default(), &mut rng);
+        let moved = sample_motion(&p, &o, &o, &SlamOptions::default().motion_noise(), &mut rng);
         assert!(moved.distance(&p) < 1e-12 && (moved.theta - p.theta).abs() < 1e-12, "{moved:?}");
     }
 }

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::geometry::Real;
 pub use crate::pf::resample::Scheme;
 pub use crate::pf::trajectory::BetweenScans;
+use crate::slam::motion::MotionNoise;
 
 /// A limit on pose evaluations per particle per reading (seed 003's
 /// scan-matching cutoff). In files: `"none"` or a number.
@@ -155,6 +156,11 @@ impl Default for SlamOptions {
 }
 
 impl SlamOptions {
+    /// The motion model's noise settings.
+    pub fn motion_noise(&self) -> MotionNoise {
+        MotionNoise { srr: self.srr, srt: self.srt, str: self.str, stt: self.stt }
+    }
+
     /// Checks every range; says which setting is wrong.
     pub fn check(&self) -> Result<(), String> {
         let positive = |name: &str, v: Real| {
