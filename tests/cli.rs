@@ -606,3 +606,60 @@ fn parfil_runs_on_the_particle_filter_topology_and_finds_the_robot() {
     }
     assert!(last[0] == last[1], "K = 2 differs from K = 1");
 }
+
+#[test]
+fn localize_tracks_a_simulated_robot_in_a_real_building_map() {
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let cache = out_dir("localize-scenes");
+    let run = |k: &str, dir: &Path| {
+        let out = squall(&[
+            "localize",
+            "--map",
+            &map,
+            "--sim",
+            "--duration",
+            "30",
+            "--matchers",
+            k,
+            "--set",
+            &format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap())),
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    };
+    let (one, two) = (out_dir("localize-k1"), out_dir("localize-k2"));
+    run("1", &one);
+    run("2", &two);
+    let tum = one.join("trajectory.tum");
+    let truth = one.join("ground_truth.tum");
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        tum.to_str().unwrap(),
+        "--ground-truth",
+        truth.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    let ate = v["ate_rmse"].as_f64().unwrap_or_else(|| panic!("no ATE in {v}"));
+    assert!(ate < 0.05, "ATE {ate} m");
+    assert!(
+        std::fs::read(&tum).unwrap() == std::fs::read(two.join("trajectory.tum")).unwrap(),
+        "two matchers differ from one"
+    );
+    assert!(std::fs::read_dir(&cache).unwrap().count() == 1, "the scene grid was cached once");
+    let bad =
+        squall(&["localize", "--map", &map, "--sim", "--resampling", "best", "--out", one.to_str().unwrap()]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(text(&bad.stderr).contains("--resampling"), "{}", text(&bad.stderr));
+    let bad = squall(&["localize", "--map", &map, "--out", one.to_str().unwrap()]);
+    assert_eq!(bad.status.code(), Some(2));
+    for d in [one, two, cache] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
+
+fn toml_string(s: &str) -> String {
+    format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
+}

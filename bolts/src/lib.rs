@@ -5,6 +5,7 @@
 //! return values, so they can be tested, benchmarked and reused alone.
 
 pub mod cgr;
+pub mod cgr_topology;
 pub mod eval;
 pub mod geometry;
 pub mod linemap;

@@ -1,6 +1,7 @@
 //! Argument parsing and the subcommands.
 
 mod eval;
+mod localize;
 mod progress;
 mod run;
 mod sim;
@@ -85,6 +86,9 @@ enum Command {
     /// RBPF SLAM on a log, a bag or the simulated office; writes map.pgm,
     /// map.yaml, map.png, trajectory.tum and metrics.json.
     Slam(slam::SlamArgs),
+    /// Localize on a line map with CGR (simulated laser for now); writes
+    /// trajectory.tum, ground_truth.tum and metrics.json.
+    Localize(localize::LocalizeArgs),
     /// Run SLAM for every (particles, matcher tasks) pair; print the
     /// speedup table, write speedup.csv and speedup.svg.
     Speedup(speedup::SpeedupArgs),
@@ -134,6 +138,7 @@ pub(crate) fn main() -> ExitCode {
         Command::Sim(args) => sim::sim(&args),
         Command::Slam(args) => slam::slam(&args),
         Command::Speedup(args) => speedup::speedup(&args),
+        Command::Localize(args) => localize::localize(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");

@@ -10,7 +10,7 @@
 //! holds the source back while the matchers work, the matcher tasks each
 //! hold a share of the particles and exchange parents' states as peers,
 //! the resampler owns the weights and the lineage. Every kind takes
-//! `model = "slam"` or `"parfil"` (the model the run uses).
+//! `model = "slam"`, `"parfil"` or `"cgr"` (the model the run uses).
 
 pub mod dispatcher;
 pub mod matcher;
@@ -21,6 +21,8 @@ use squall_topology::{
     Bolt, BoxError, Declarer, Emitter, Message, ParamError, Params, Registry, TaskContext, Tuple,
 };
 
+use crate::cgr::model::CgrModel;
+use crate::cgr::observation::Observation2d;
 use crate::geometry::Pose2;
 use crate::map::OccupancyGrid;
 use crate::parfil::{ParfilModel, ParfilOptions, ParfilReading};
@@ -89,8 +91,20 @@ impl HostedModel for ParfilModel {
     }
 }
 
+impl HostedModel for CgrModel {
+    type Snapshot = Pose2;
+
+    fn from_table(table: toml::Table) -> Result<Self, String> {
+        crate::cgr_topology::cgr_model(table)
+    }
+
+    fn snapshot(&self, state: &Pose2) -> Pose2 {
+        *state
+    }
+}
+
 /// The models the kinds know, by their `model` name.
-const MODELS: &[&str] = &["slam", "parfil"];
+const MODELS: &[&str] = &["slam", "parfil", "cgr"];
 
 fn model_of(p: &Params) -> Result<&str, ParamError> {
     let name = p
@@ -140,28 +154,35 @@ macro_rules! per_model {
 
 per_model!(
     /// `pf.dispatcher` for the run's model.
-    AnyDispatcher { Slam(Dispatcher<LaserReading>), Parfil(Dispatcher<ParfilReading>) }
+    AnyDispatcher {
+        Slam(Dispatcher<LaserReading>),
+        Parfil(Dispatcher<ParfilReading>),
+        Cgr(Dispatcher<Observation2d>),
+    }
 );
 
 per_model!(
     /// `pf.matcher` for the run's model.
-    AnyMatcher { Slam(Matcher<SlamModel>), Parfil(Matcher<ParfilModel>) }
+    AnyMatcher { Slam(Matcher<SlamModel>), Parfil(Matcher<ParfilModel>), Cgr(Matcher<CgrModel>) }
 );
 
-/// Registers `pf.dispatcher`, `pf.matcher` and `pf.resampler`.
+/// Registers `pf.dispatcher`, `pf.matcher`, `pf.resampler` and `cgr.laser`.
 pub fn register(r: &mut Registry) {
     r.register_bolt("pf.dispatcher", |p: &Params| {
         Ok(match model_of(p)? {
             "slam" => AnyDispatcher::Slam(Box::new(Dispatcher::from_params(p)?)),
-            _ => AnyDispatcher::Parfil(Box::new(Dispatcher::from_params(p)?)),
+            "parfil" => AnyDispatcher::Parfil(Box::new(Dispatcher::from_params(p)?)),
+            _ => AnyDispatcher::Cgr(Box::new(Dispatcher::from_params(p)?)),
         })
     });
     r.register_bolt("pf.matcher", |p: &Params| {
         Ok(match model_of(p)? {
             "slam" => AnyMatcher::Slam(Box::new(Matcher::from_params(p)?)),
-            _ => AnyMatcher::Parfil(Box::new(Matcher::from_params(p)?)),
+            "parfil" => AnyMatcher::Parfil(Box::new(Matcher::from_params(p)?)),
+            _ => AnyMatcher::Cgr(Box::new(Matcher::from_params(p)?)),
         })
     });
+    r.register_bolt("cgr.laser", crate::cgr_topology::LaserPoints::from_params);
     r.register_bolt("pf.resampler", |p: &Params| {
         model_of(p)?;
         resampler::Resampler::from_params(p)

@@ -1,0 +1,216 @@
+//! The localization kinds: `cgr.laser` turns laser scans into the 2-D
+//! points with normals that CGR matches, and the `cgr` model for the
+//! particle filter kinds (`model = "cgr"`), built from the matcher's
+//! params: the map file, particles, start, resampling, measurement and
+//! motion settings, and where precomputed scenes are cached.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use serde::Deserialize;
+use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tuple};
+
+use crate::cgr::measurement::CgrOptions;
+use crate::cgr::model::{CgrModel, Init, LocalizeOptions};
+use crate::cgr::observation::Observation2d;
+use crate::cgr::scene_grid::SceneGrid;
+use crate::geometry::{Pose2, Real};
+use crate::linemap::LineMap;
+use crate::pf::resample::Scheme;
+use crate::sensor::LaserReading;
+use crate::slam::motion::MotionNoise;
+
+/// `cgr.laser`: each `LaserReading` becomes an `Observation2d` (beams up
+/// to `max_range`, default 8 m).
+#[derive(Debug)]
+pub struct LaserPoints {
+    max_range: Real,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LaserParams {
+    #[serde(default = "default_range")]
+    max_range: Real,
+}
+
+fn default_range() -> Real {
+    8.0
+}
+
+impl LaserPoints {
+    /// Builds it from `max_range`.
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: LaserParams = p.parse()?;
+        if !(params.max_range.is_finite() && params.max_range > 0.0) {
+            return Err(ParamError::new(format!("max_range must be > 0, got {}", params.max_range)));
+        }
+        Ok(LaserPoints { max_range: params.max_range })
+    }
+}
+
+impl Bolt for LaserPoints {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<LaserReading>().output::<Observation2d>("default");
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let scan = input.get::<LaserReading>().ok_or("cgr.laser takes LaserReading")?;
+        out.emit("default", Observation2d::from_laser(scan, self.max_range)).await?;
+        Ok(())
+    }
+}
+
+/// The `cgr` model's params.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CgrParams {
+    /// The line-map file.
+    map: PathBuf,
+    #[serde(default = "default_particles")]
+    particles: usize,
+    /// `"known"` (then `start` = [x, y, θ]) or `"global"`.
+    #[serde(default = "default_init")]
+    init: String,
+    start: Option<[Real; 3]>,
+    #[serde(default)]
+    resampling: Scheme,
+    #[serde(default = "default_threshold")]
+    resample_threshold: Real,
+    /// `"grid"` (precomputed, the default) or `"on_demand"`.
+    #[serde(default = "default_scenes")]
+    scenes: String,
+    #[serde(default = "default_cell")]
+    cell: Real,
+    /// Where precomputed scenes are cached (default: the system's
+    /// temporary folder, `squall-scenes`).
+    cache_dir: Option<PathBuf>,
+    #[serde(default = "default_sigma")]
+    sigma: Real,
+    #[serde(default = "default_correlation")]
+    correlation: Real,
+    #[serde(default = "default_normal_tolerance")]
+    normal_tolerance_deg: Real,
+    #[serde(default = "default_range")]
+    range: Real,
+    #[serde(default = "default_refine")]
+    refine_iterations: u32,
+    #[serde(default = "default_srr")]
+    srr: Real,
+    #[serde(default = "default_srt")]
+    srt: Real,
+    #[serde(default = "default_str")]
+    str: Real,
+    #[serde(default = "default_stt")]
+    stt: Real,
+}
+
+fn default_particles() -> usize {
+    50
+}
+fn default_init() -> String {
+    "global".into()
+}
+fn default_threshold() -> Real {
+    0.5
+}
+fn default_scenes() -> String {
+    "grid".into()
+}
+fn default_cell() -> Real {
+    0.2
+}
+fn default_sigma() -> Real {
+    CgrOptions::default().sigma
+}
+fn default_correlation() -> Real {
+    CgrOptions::default().correlation
+}
+fn default_normal_tolerance() -> Real {
+    CgrOptions::default().normal_tolerance_deg
+}
+fn default_refine() -> u32 {
+    CgrOptions::default().refine_iterations
+}
+fn default_srr() -> Real {
+    0.1
+}
+fn default_srt() -> Real {
+    0.2
+}
+fn default_str() -> Real {
+    0.1
+}
+fn default_stt() -> Real {
+    0.2
+}
+
+/// Scene grids built in this process, by cache key: every matcher task
+/// shares one.
+fn shared_grid(
+    map: &LineMap,
+    cell: Real,
+    range: Real,
+    dir: &std::path::Path,
+) -> Result<Arc<SceneGrid>, String> {
+    static GRIDS: OnceLock<Mutex<HashMap<u64, Arc<SceneGrid>>>> = OnceLock::new();
+    let grids = GRIDS.get_or_init(Default::default);
+    let mut grids = grids.lock().map_err(|_| "the scene grid cache was poisoned".to_string())?;
+    let key = SceneGrid::key(map, cell, range);
+    if let Some(g) = grids.get(&key) {
+        return Ok(g.clone());
+    }
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let (grid, built) =
+        SceneGrid::load_or_build(map, cell, range, threads, dir).map_err(|e| e.to_string())?;
+    if built {
+        tracing::info!("observable scenes precomputed and cached in {}", dir.display());
+    }
+    let grid = Arc::new(grid);
+    grids.insert(key, grid.clone());
+    Ok(grid)
+}
+
+/// The `cgr` model from the matcher's params (without `model` and
+/// `map_interval`).
+pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
+    let p: CgrParams = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| e.to_string().trim().to_string())?;
+    let init = match (p.init.as_str(), p.start) {
+        ("global", _) => Init::Global,
+        ("known", Some([x, y, theta])) => Init::Known(Pose2::new(x, y, theta)),
+        ("known", None) => return Err("init = \"known\" needs start = [x, y, theta]".into()),
+        (other, _) => return Err(format!("init must be \"known\" or \"global\", got \"{other}\"")),
+    };
+    let cgr = CgrOptions {
+        sigma: p.sigma,
+        correlation: p.correlation,
+        normal_tolerance_deg: p.normal_tolerance_deg,
+        range: p.range,
+        refine_iterations: p.refine_iterations,
+    };
+    cgr.check()?;
+    if !(p.cell.is_finite() && p.cell > 0.0) {
+        return Err(format!("cell must be > 0, got {}", p.cell));
+    }
+    let map = Arc::new(LineMap::load(&p.map).map_err(|e| e.to_string())?);
+    let scenes = match p.scenes.as_str() {
+        "on_demand" => None,
+        "grid" => {
+            let dir = p.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("squall-scenes"));
+            Some(shared_grid(&map, p.cell, p.range, &dir)?)
+        }
+        other => return Err(format!("scenes must be \"grid\" or \"on_demand\", got \"{other}\"")),
+    };
+    let options = LocalizeOptions {
+        particles: p.particles,
+        cgr,
+        motion: MotionNoise { srr: p.srr, srt: p.srt, str: p.str, stt: p.stt },
+        init,
+        resampling: p.resampling,
+        resample_threshold: p.resample_threshold,
+    };
+    CgrModel::new(map, scenes, options)
+}

@@ -1,0 +1,123 @@
+//! `squall localize`: runs `examples/topologies/localize.toml` (embedded):
+//! CGR localization on a line map, here on the simulator's laser.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use squall_spouts::sim::{SimConfig, SimEvent, Simulation, floor_for};
+use squall_topology::{Override, TopologySpec};
+
+use super::{EXIT_INVALID, report_invalid, run};
+
+const LOCALIZE_TOML: &str = include_str!("../../examples/topologies/localize.toml");
+
+#[derive(Debug, clap::Args)]
+pub(super) struct LocalizeArgs {
+    /// The line map (`x1,y1,x2,y2` per line).
+    #[arg(long, value_name = "FILE")]
+    map: PathBuf,
+    /// Simulate a robot in the map (the only input for now).
+    #[arg(long)]
+    sim: bool,
+    /// Simulated seconds.
+    #[arg(long, default_value_t = 120.0)]
+    duration: f64,
+    /// Particles.
+    #[arg(long, default_value_t = 50)]
+    particles: usize,
+    /// Matcher tasks (the results do not depend on it).
+    #[arg(long, default_value_t = 1)]
+    matchers: usize,
+    /// How the new set is drawn.
+    #[arg(long, value_name = "low-variance|sparse-ring|global", default_value = "low-variance")]
+    resampling: String,
+    /// `known` (start at the true pose) or `global` (uniform over the map).
+    #[arg(long, value_name = "known|global", default_value = "known")]
+    init: String,
+    /// Run seed (simulated world, route and noise, and the filter).
+    #[arg(long, default_value_t = 42)]
+    seed: u64,
+    /// Override any value (as in `squall run`).
+    #[arg(long = "set", value_name = "PATH=VALUE", value_parser = super::parse_override)]
+    overrides: Vec<Override>,
+    /// Output folder: trajectory.tum, ground_truth.tum, metrics.json.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+fn quoted(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
+    if !args.sim {
+        return Err("--sim is required: recorded depth and laser input come later".into());
+    }
+    if args.matchers == 0 || args.particles == 0 {
+        return Err("--matchers and --particles must be at least 1".into());
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        return Err(format!("--duration must be > 0 seconds, got {}", args.duration));
+    }
+    let scheme = match args.resampling.as_str() {
+        "low-variance" => "low_variance",
+        "sparse-ring" => "ring",
+        "global" => "aggregation",
+        other => {
+            return Err(format!("--resampling must be low-variance, sparse-ring or global, got {other}"));
+        }
+    };
+    let map = args.map.to_string_lossy().to_string();
+    let mut sets = vec![
+        format!("topology.seed={}", args.seed),
+        format!("source.params.world={}", quoted(&map)),
+        format!("source.params.duration_secs={}", args.duration),
+        format!("matcher.parallelism={}", args.matchers),
+        format!("matcher.params.map={}", quoted(&map)),
+        format!("matcher.params.particles={}", args.particles),
+        format!("matcher.params.resampling={}", quoted(scheme)),
+    ];
+    match args.init.as_str() {
+        "global" => sets.push("matcher.params.init=\"global\"".into()),
+        "known" => {
+            let start = first_true_pose(&map, args)?;
+            sets.push("matcher.params.init=\"known\"".into());
+            sets.push(format!("matcher.params.start=[{}, {}, {}]", start.0, start.1, start.2));
+        }
+        other => return Err(format!("--init must be known or global, got {other}")),
+    }
+    let mut out: Vec<Override> = sets.iter().map(|s| s.parse()).collect::<Result<_, _>>()?;
+    out.extend(args.overrides.iter().cloned());
+    Ok(out)
+}
+
+/// Where the simulated robot starts (the simulator is deterministic per
+/// seed: this is the pose of its first scan).
+fn first_true_pose(map: &str, args: &LocalizeArgs) -> Result<(f64, f64, f64), String> {
+    let floor = floor_for(map, args.seed)?;
+    let config =
+        SimConfig { seed: args.seed, duration_secs: args.duration, range_max: 8.0, ..SimConfig::default() };
+    config.check()?;
+    Simulation::new(floor, config)
+        .find_map(|e| match e {
+            SimEvent::Scan(_, truth) => Some((truth.x, truth.y, truth.theta)),
+            SimEvent::Odom(_) => None,
+        })
+        .ok_or_else(|| "the simulation produced no scan".to_string())
+}
+
+/// Runs `squall localize`.
+pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
+    let overrides = match overrides(args) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let spec = TopologySpec::parse_with("localize.toml (built in)", LOCALIZE_TOML, &overrides);
+    match report_invalid(spec) {
+        Ok(topology) => run::run(&topology, Some(args.out.clone()), false),
+        Err(code) => code,
+    }
+}
