@@ -663,3 +663,48 @@ fn localize_tracks_a_simulated_robot_in_a_real_building_map() {
 fn toml_string(s: &str) -> String {
     format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
 }
+
+#[test]
+fn global_localization_converges_within_ten_seconds() {
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let (dir, cache) = (out_dir("localize-global"), out_dir("localize-global-scenes"));
+    let out = squall(&[
+        "localize",
+        "--map",
+        &map,
+        "--sim",
+        "--duration",
+        "15",
+        "--init",
+        "global",
+        "--particles",
+        "500",
+        "--set",
+        &format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap())),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let read = |f: &str| -> Vec<(f64, f64, f64)> {
+        std::fs::read_to_string(dir.join(f))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| {
+                let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+                (v[0], v[1], v[2])
+            })
+            .collect()
+    };
+    let (estimate, truth) = (read("trajectory.tum"), read("ground_truth.tum"));
+    assert_eq!(estimate.len(), truth.len());
+    let t0 = truth[0].0;
+    let first_error = (estimate[0].1 - truth[0].1).hypot(estimate[0].2 - truth[0].2);
+    assert!(first_error > 1.0, "the uniform start is not already at the robot ({first_error:.2} m)");
+    for (e, t) in estimate.iter().zip(&truth).filter(|(_, t)| t.0 - t0 >= 10.0) {
+        let error = (e.1 - t.1).hypot(e.2 - t.2);
+        assert!(error < 0.2, "{:.1} s after the start the estimate is {error:.2} m off", t.0 - t0);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&cache);
+}

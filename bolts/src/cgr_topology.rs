@@ -96,6 +96,8 @@ struct CgrParams {
     range: Real,
     #[serde(default = "default_refine")]
     refine_iterations: u32,
+    #[serde(default = "default_outlier")]
+    outlier_sigmas: Real,
     #[serde(default = "default_srr")]
     srr: Real,
     #[serde(default = "default_srt")]
@@ -132,6 +134,9 @@ fn default_normal_tolerance() -> Real {
 }
 fn default_refine() -> u32 {
     CgrOptions::default().refine_iterations
+}
+fn default_outlier() -> Real {
+    CgrOptions::default().outlier_sigmas
 }
 fn default_srr() -> Real {
     0.1
@@ -190,6 +195,7 @@ pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
         normal_tolerance_deg: p.normal_tolerance_deg,
         range: p.range,
         refine_iterations: p.refine_iterations,
+        outlier_sigmas: p.outlier_sigmas,
     };
     cgr.check()?;
     if !(p.cell.is_finite() && p.cell > 0.0) {

@@ -2,8 +2,9 @@
 //! and Corrective Gradient Refinement: each observed point is matched to
 //! the wall of the observable scene that the ray from the sensor through
 //! it meets first; points with no such wall, or whose normal disagrees
-//! with the wall's, are left out; the rest contribute −d²/(2fσ²) to the
-//! log-likelihood, d being the point's distance to its wall's line.
+//! with the wall's, count as outliers; the rest contribute −d²/(2fσ²) to
+//! the log-likelihood, d being the point's distance to its wall's line,
+//! capped at `outlier_sigmas` σ (an outlier counts as that far off).
 
 use std::borrow::Cow;
 
@@ -31,6 +32,11 @@ pub struct CgrOptions {
     pub range: Real,
     /// Gradient steps per particle per observation. The default is 3.
     pub refine_iterations: u32,
+    /// A point farther than this many σ from its wall, or with no wall or
+    /// a disagreeing normal, counts as that far off: poses that explain
+    /// nothing are not better than poses that explain something badly
+    /// (which matters when the particles start anywhere). The default is 3.
+    pub outlier_sigmas: Real,
 }
 
 impl Default for CgrOptions {
@@ -41,6 +47,7 @@ impl Default for CgrOptions {
             normal_tolerance_deg: 30.0,
             range: 8.0,
             refine_iterations: 3,
+            outlier_sigmas: 3.0,
         }
     }
 }
@@ -48,7 +55,12 @@ impl Default for CgrOptions {
 impl CgrOptions {
     /// Checks every range; says which setting is wrong.
     pub fn check(&self) -> Result<(), String> {
-        for (name, v) in [("sigma", self.sigma), ("correlation", self.correlation), ("range", self.range)] {
+        for (name, v) in [
+            ("sigma", self.sigma),
+            ("correlation", self.correlation),
+            ("range", self.range),
+            ("outlier_sigmas", self.outlier_sigmas),
+        ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(format!("{name} must be > 0, got {v}"));
             }
@@ -91,11 +103,16 @@ pub fn evaluate(
     let sensor = (pose.x + c * obs.sensor.0 - s * obs.sensor.1, pose.y + s * obs.sensor.0 + c * obs.sensor.1);
     let per_variance = 1.0 / (o.correlation * o.sigma * o.sigma);
     let min_cos = o.normal_tolerance_deg.to_radians().cos();
+    let cap = o.outlier_sigmas * o.sigma;
+    let outlier = -0.5 * cap * cap * per_variance;
     let mut e = Evaluation::default();
     for (p, n) in obs.points.iter().zip(&obs.normals) {
         let (px, py) = (Real::from(p[0]), Real::from(p[1]));
         let q = (pose.x + c * px - s * py, pose.y + s * px + c * py);
-        let Some((line, _)) = first_hit(map, lines.iter().copied(), sensor, q) else { continue };
+        let Some((line, _)) = first_hit(map, lines.iter().copied(), sensor, q) else {
+            e.log_likelihood += outlier;
+            continue;
+        };
         let w = &map.walls[line as usize];
         let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
         let len = ex.hypot(ey);
@@ -103,9 +120,14 @@ pub fn evaluate(
         let (nx, ny) = (Real::from(n[0]), Real::from(n[1]));
         let (wx, wy) = (c * nx - s * ny, s * nx + c * ny);
         if (lx * wx + ly * wy).abs() < min_cos {
+            e.log_likelihood += outlier;
             continue;
         }
         let d = lx * (q.0 - w.a.0) + ly * (q.1 - w.a.1);
+        if d.abs() > cap {
+            e.log_likelihood += outlier;
+            continue;
+        }
         // ∂q/∂θ = R'(θ) p.
         let (dqx, dqy) = (-s * px - c * py, c * px - s * py);
         let dd = [lx, ly, lx * dqx + ly * dqy];
