@@ -705,6 +705,19 @@ fn global_localization_converges_within_ten_seconds() {
         let error = (e.1 - t.1).hypot(e.2 - t.2);
         assert!(error < 0.2, "{:.1} s after the start the estimate is {error:.2} m off", t.0 - t0);
     }
+    // The hypotheses: several modes at first, then one heavy mode at the
+    // robot.
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(dir.join("hypotheses.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), truth.len() - 1, "one line per corrected scan");
+    assert!(lines[0]["modes"].as_array().unwrap().len() > 1, "{}", lines[0]);
+    let last = &lines[lines.len() - 1]["modes"][0];
+    let (x, y) = (last["pose"]["x"].as_f64().unwrap(), last["pose"]["y"].as_f64().unwrap());
+    let t = truth[truth.len() - 1];
+    assert!((x - t.1).hypot(y - t.2) < 0.2 && last["weight"].as_f64().unwrap() > 0.9, "{last}");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&cache);
 }

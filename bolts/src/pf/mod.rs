@@ -9,6 +9,7 @@
 pub mod assign;
 pub mod filter;
 pub mod model;
+pub mod modes;
 pub mod population;
 pub mod resample;
 pub mod shard;

@@ -35,6 +35,8 @@ pub struct Decision {
     /// The slot of the best particle (highest lineage weight) after the
     /// decision.
     pub best: usize,
+    /// The normalized weights before resampling, by old slot.
+    pub weights: Vec<Real>,
 }
 
 /// Weights and lineage of every particle slot.
@@ -104,7 +106,7 @@ impl Population {
         self.nodes = nodes;
         self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
         self.log_weights = if resampled { vec![0.0; n] } else { self.log_weights.clone() };
-        Decision { neff, parents, resampled, best: self.best() }
+        Decision { neff, parents, resampled, best: self.best(), weights }
     }
 
     /// The slot with the highest lineage weight (the last of equals).

@@ -3,7 +3,8 @@
 //! selectively, assigns the new set to the tasks (Hungarian algorithm:
 //! equal load, fewest bytes moved) and broadcasts the decision. It owns the
 //! lineage tree, so it emits the best estimate for every reading on `pose`
-//! and, at the end, the best particle's trajectory on `trajectory`.
+//! and, at the end, the best particle's trajectory on `trajectory`; per
+//! correction it emits the particle set's heaviest modes on `hypotheses`.
 //! Metrics per correction: `neff_x100`, `resamplings`, `particles_moved`,
 //! `bytes_moved`, `resample_us` (resampling and assignment),
 //! `imbalance_us` (slowest matcher task's correction minus the mean: seed
@@ -17,6 +18,7 @@ use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tas
 
 use crate::geometry::{Pose2, Real};
 use crate::pf::assign::{Placement, assign, loads, moved, round_robin};
+use crate::pf::modes::{Hypotheses, modes};
 use crate::pf::population::Population;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory;
@@ -28,6 +30,26 @@ use crate::sensor::PoseStamped;
 struct ResamplerParams {
     #[allow(dead_code)]
     model: String,
+    /// Modes reported on `hypotheses` per correction. The default is 3.
+    #[serde(default = "default_keep")]
+    hypotheses: usize,
+    /// Particles within this distance (m) of a mode's seed join it. The
+    /// default is 0.5.
+    #[serde(default = "default_radius")]
+    mode_radius: Real,
+    /// ...and within this heading difference, radians. The default is 0.5.
+    #[serde(default = "default_turn")]
+    mode_turn: Real,
+}
+
+fn default_keep() -> usize {
+    3
+}
+fn default_radius() -> Real {
+    0.5
+}
+fn default_turn() -> Real {
+    0.5
 }
 
 /// Reports gathered for the current reading.
@@ -56,12 +78,17 @@ pub struct Resampler {
     /// Every reading's stamp and odometry, for the trajectory.
     marks: Vec<(f64, Pose2)>,
     gathered: Gathered,
+    /// (modes kept, radius, turn) for `hypotheses`.
+    modes: (usize, Real, Real),
 }
 
 impl Resampler {
     /// Builds it (the `model` param names the model the run uses).
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
-        let _: ResamplerParams = p.parse()?;
+        let params: ResamplerParams = p.parse()?;
+        if !(params.mode_radius > 0.0 && params.mode_turn > 0.0) {
+            return Err(ParamError::new("mode_radius and mode_turn must be > 0"));
+        }
         if p.parallelism() != 1 {
             return Err(ParamError::new("pf.resampler runs as one task (it sees every weight)"));
         }
@@ -73,6 +100,7 @@ impl Resampler {
             task_of: Vec::new(),
             marks: Vec::new(),
             gathered: Gathered::default(),
+            modes: (params.hypotheses, params.mode_radius, params.mode_turn),
         })
     }
 
@@ -157,6 +185,12 @@ impl Resampler {
         self.task_of = task_of;
         self.marks.push(mark);
         out.emit("decision", decision).await?;
+        let (keep, radius, turn) = self.modes;
+        if keep > 0 {
+            let poses: Vec<Pose2> = slots.iter().map(|s| s.pose).collect();
+            let found = modes(&poses, &d.weights, radius, turn, keep);
+            out.emit("hypotheses", Hypotheses { stamp: mark.0, modes: found }).await?;
+        }
         self.emit_estimate(mark, out).await
     }
 }
@@ -167,7 +201,8 @@ impl Bolt for Resampler {
             .output::<Decision>("decision")
             .output::<Ready>("ready")
             .output::<PoseStamped>("pose")
-            .output::<PoseStamped>("trajectory");
+            .output::<PoseStamped>("trajectory")
+            .output::<Hypotheses>("hypotheses");
     }
 
     async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {

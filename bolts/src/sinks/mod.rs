@@ -2,12 +2,14 @@
 //! `sink.trajectory` and `sink.map` bolts that call them at the end of a run.
 //! Every file is written atomically.
 
+mod hypotheses_sink;
 pub mod map_files;
 mod map_sink;
 mod trajectory_sink;
 
 use std::path::Path;
 
+pub use hypotheses_sink::HypothesesSink;
 pub use map_sink::MapSink;
 use squall_topology::Registry;
 use squall_topology::fsio::write_atomic;
@@ -20,8 +22,9 @@ pub fn write_tum(trajectory: &Trajectory, path: &Path) -> std::io::Result<()> {
     write_atomic(path, trajectory.to_tum().as_bytes())
 }
 
-/// Registers `sink.trajectory` and `sink.map`.
+/// Registers `sink.trajectory`, `sink.map` and `sink.hypotheses`.
 pub fn register(r: &mut Registry) {
+    r.register_bolt("sink.hypotheses", HypothesesSink::from_params);
     r.register_bolt("sink.trajectory", TrajectorySink::from_params);
     r.register_bolt("sink.map", MapSink::from_params);
 }
