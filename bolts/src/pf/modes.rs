@@ -29,7 +29,13 @@ pub struct Hypotheses {
     pub modes: Vec<Mode>,
 }
 
-/// The `keep` heaviest modes of `poses` with normalized `weights`.
+/// Modes opened at most: particles that fit none of them once this many
+/// exist (light ones, taken last) are left out, which bounds the work by
+/// N × this for a spread-out set.
+pub const MAX_OPEN: usize = 64;
+
+/// The `keep` heaviest modes of `poses` with normalized `weights` (a
+/// mode's weight is its share of all the weight).
 pub fn modes(poses: &[Pose2], weights: &[Real], radius: Real, turn: Real, keep: usize) -> Vec<Mode> {
     let mut order: Vec<usize> = (0..poses.len().min(weights.len())).collect();
     order.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
@@ -37,16 +43,18 @@ pub fn modes(poses: &[Pose2], weights: &[Real], radius: Real, turn: Real, keep: 
     let mut found: Vec<(Pose2, [Real; 5], usize)> = Vec::new();
     for i in order {
         let (p, w) = (poses[i], weights[i]);
-        let home = found.iter_mut().find(|(seed, _, _)| {
+        let home = found.iter().position(|(seed, _, _)| {
             seed.distance(&p) <= radius && normalize_angle(seed.theta - p.theta).abs() <= turn
         });
-        let entry = match home {
-            Some(m) => m,
-            None => {
+        let index = match home {
+            Some(k) => k,
+            None if found.len() < MAX_OPEN => {
                 found.push((p, [0.0; 5], 0));
-                found.last_mut().expect("just pushed")
+                found.len() - 1
             }
+            None => continue,
         };
+        let entry = &mut found[index];
         let s = &mut entry.1;
         s[0] += w;
         s[1] += w * p.x;
@@ -55,7 +63,7 @@ pub fn modes(poses: &[Pose2], weights: &[Real], radius: Real, turn: Real, keep: 
         s[4] += w * p.theta.sin();
         entry.2 += 1;
     }
-    let total: Real = found.iter().map(|m| m.1[0]).sum();
+    let total: Real = weights.iter().take(poses.len()).sum();
     let mut out: Vec<Mode> = found
         .into_iter()
         .map(|(seed, s, particles)| {
@@ -92,6 +100,15 @@ mod tests {
         assert!((m[0].weight - 0.75).abs() < 1e-12 && (m[1].weight - 0.25).abs() < 1e-12);
         assert!((m[0].pose.x - 1.02).abs() < 1e-9 && (m[1].pose.y + 2.955).abs() < 1e-9, "{m:?}");
         assert_eq!(modes(&poses, &weights, 0.5, 0.5, 1).len(), 1);
+    }
+
+    #[test]
+    fn a_spread_out_set_opens_a_bounded_number_of_modes() {
+        let poses: Vec<Pose2> = (0..1000).map(|k| Pose2::new(k as Real, 0.0, 0.0)).collect();
+        let weights = vec![0.001; 1000];
+        let m = modes(&poses, &weights, 0.5, 0.5, 1000);
+        assert_eq!(m.len(), MAX_OPEN);
+        assert!(m.iter().all(|x| (x.weight - 0.001).abs() < 1e-12), "shares of the whole set");
     }
 
     #[test]
