@@ -17,6 +17,7 @@ use crate::cgr::observation::Observation2d;
 use crate::cgr::scene_grid::SceneGrid;
 use crate::geometry::{Pose2, Real};
 use crate::linemap::LineMap;
+use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::sensor::LaserReading;
 use crate::slam::motion::MotionNoise;
@@ -98,6 +99,14 @@ struct CgrParams {
     refine_iterations: u32,
     #[serde(default = "default_outlier")]
     outlier_sigmas: Real,
+    /// Augmented MCL (random particles when observations stop fitting):
+    /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`.
+    #[serde(default)]
+    injection: bool,
+    #[serde(default = "default_alpha_slow")]
+    alpha_slow: Real,
+    #[serde(default = "default_alpha_fast")]
+    alpha_fast: Real,
     #[serde(default = "default_srr")]
     srr: Real,
     #[serde(default = "default_srt")]
@@ -134,6 +143,12 @@ fn default_normal_tolerance() -> Real {
 }
 fn default_refine() -> u32 {
     CgrOptions::default().refine_iterations
+}
+fn default_alpha_slow() -> Real {
+    0.01
+}
+fn default_alpha_fast() -> Real {
+    0.3
 }
 fn default_outlier() -> Real {
     CgrOptions::default().outlier_sigmas
@@ -217,6 +232,7 @@ pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
         init,
         resampling: p.resampling,
         resample_threshold: p.resample_threshold,
+        injection: p.injection.then_some(Injection { alpha_slow: p.alpha_slow, alpha_fast: p.alpha_fast }),
     };
     CgrModel::new(map, scenes, options)
 }

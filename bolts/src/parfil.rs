@@ -207,7 +207,7 @@ impl ParticleModel for ParfilModel {
             .zip(&input.bearings)
             .map(|(e, o)| -0.5 * (normalize_angle(o - e) * per_sigma).powi(2))
             .sum();
-        Correction { log_likelihood, evaluations: 1 }
+        Correction { log_likelihood, evaluations: 1, fit: log_likelihood }
     }
 
     fn update(&self, _: &mut Pose2, _: &ParfilReading) -> u64 {

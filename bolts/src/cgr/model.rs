@@ -17,7 +17,7 @@ use crate::cgr::scene::observable_scene;
 use crate::cgr::scene_grid::SceneGrid;
 use crate::geometry::{Pose2, Real};
 use crate::linemap::LineMap;
-use crate::pf::model::{Correction, ParticleModel};
+use crate::pf::model::{Correction, Injection, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::slam::model::OdometryStep;
 use crate::slam::motion::{MotionNoise, sample_motion};
@@ -47,6 +47,10 @@ pub struct LocalizeOptions {
     pub resampling: Scheme,
     /// Resample below this fraction of N (Neff).
     pub resample_threshold: Real,
+    /// Random particles injected when observations stop fitting (augmented
+    /// MCL, meant for recovery from kidnapping); `None`, the default, turns
+    /// it off. Not yet shown to recover a kidnapped robot here.
+    pub injection: Option<Injection>,
 }
 
 impl Default for LocalizeOptions {
@@ -58,6 +62,7 @@ impl Default for LocalizeOptions {
             init: Init::Global,
             resampling: Scheme::LowVariance,
             resample_threshold: 0.5,
+            injection: None,
         }
     }
 }
@@ -80,6 +85,14 @@ impl CgrModel {
         options.cgr.check()?;
         if options.particles == 0 {
             return Err("particles must be at least 1".into());
+        }
+        if let Some(i) = options.injection {
+            if !(0.0 < i.alpha_slow && i.alpha_slow < i.alpha_fast && i.alpha_fast <= 1.0) {
+                return Err(format!(
+                    "injection rates must satisfy 0 < alpha_slow < alpha_fast ≤ 1, got {} and {}",
+                    i.alpha_slow, i.alpha_fast
+                ));
+            }
         }
         Ok(CgrModel { map, scenes, options })
     }
@@ -120,13 +133,21 @@ impl ParticleModel for CgrModel {
 
     fn scatter(&self, pose: &mut Pose2, rng: &mut ChaCha8Rng) {
         if self.options.init == Init::Global {
-            let (x0, y0, x1, y1) = self.map.bounds();
-            *pose = Pose2::new(
-                x0 + rng.random::<Real>() * (x1 - x0),
-                y0 + rng.random::<Real>() * (y1 - y0),
-                (rng.random::<Real>() * 2.0 - 1.0) * std::f64::consts::PI,
-            );
+            self.inject(pose, rng);
         }
+    }
+
+    fn injection(&self) -> Option<Injection> {
+        self.options.injection
+    }
+
+    fn inject(&self, pose: &mut Pose2, rng: &mut ChaCha8Rng) {
+        let (x0, y0, x1, y1) = self.map.bounds();
+        *pose = Pose2::new(
+            x0 + rng.random::<Real>() * (x1 - x0),
+            y0 + rng.random::<Real>() * (y1 - y0),
+            (rng.random::<Real>() * 2.0 - 1.0) * std::f64::consts::PI,
+        );
     }
 
     fn mark(&self, input: &Observation2d) -> (f64, Pose2) {
@@ -149,7 +170,8 @@ impl ParticleModel for CgrModel {
         let (refined, e, evaluations) =
             refine(&self.map, &mut |p: &Pose2| self.lines_at(p), pose, input, &self.options.cgr);
         *pose = refined;
-        Correction { log_likelihood: e.log_likelihood, evaluations }
+        let points = input.points.len().max(1) as Real;
+        Correction { log_likelihood: e.log_likelihood, evaluations, fit: e.log_likelihood / points }
     }
 
     fn update(&self, _: &mut Pose2, _: &Observation2d) -> u64 {

@@ -22,6 +22,8 @@ pub struct StepReport {
     pub update_work: u64,
     /// What the reassignment after resampling moved between tasks.
     pub moved: Moved,
+    /// Particles redrawn at random (augmented MCL).
+    pub injected: usize,
 }
 
 /// A particle filter over `model`, its particles split over K shards.
@@ -110,6 +112,7 @@ where
         reports.sort_by_key(|r| r.slot);
         let population = self.population.as_mut().expect("started");
         let poses: Vec<(Pose2, Real)> = reports.iter().map(|r| (r.pose, r.log_likelihood)).collect();
+        let fits: Vec<Real> = reports.iter().map(|r| r.fit).collect();
         let decision = population.correct(
             self.step,
             model.mark(input),
@@ -117,6 +120,7 @@ where
             model.weight_smoothing(),
             model.resample_threshold(),
             model.resampling(),
+            model.injection().map(|i| (i, &fits[..])),
         );
         let parents = &decision.parents;
         let (task_of, moved_now) = if decision.resampled {
@@ -139,7 +143,9 @@ where
             }
         }
         for (shard, inbox) in self.shards.iter_mut().zip(inboxes) {
-            shard.adopt(parents, &task_of, inbox).expect("every parent is held by some shard");
+            shard
+                .adopt(model, self.step, parents, &task_of, &decision.fresh, inbox)
+                .expect("every parent is held by some shard");
         }
         self.task_of = task_of;
         let update_work = self.shards.iter_mut().map(|s| s.update(model, input)).sum();
@@ -149,6 +155,7 @@ where
             resampled: decision.resampled,
             update_work,
             moved: moved_now,
+            injected: decision.fresh.len(),
         }
     }
 

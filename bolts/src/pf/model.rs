@@ -91,10 +91,34 @@ pub trait ParticleModel: Send + Sync + 'static {
         Scheme::LowVariance
     }
 
+    /// Random particles to add when the observations stop fitting
+    /// (augmented MCL, for recovery from kidnapping); `None`, the
+    /// default, adds none.
+    fn injection(&self) -> Option<Injection> {
+        None
+    }
+
+    /// Redraws a particle from scratch (an injected one). The default
+    /// keeps it.
+    fn inject(&self, state: &mut Self::State, rng: &mut ChaCha8Rng) {
+        let _ = (state, rng);
+    }
+
     /// How the trajectory fills in readings between corrections.
     fn between_readings(&self) -> (BetweenScans, NoiseWeights) {
         (BetweenScans::Odometry, NoiseWeights { per_metre: 0.0, per_radian: 0.0 })
     }
+}
+
+/// Augmented MCL's smoothing of the mean observation likelihood: a slow
+/// and a fast average; while the fast one is below the slow one, a share
+/// 1 − fast/slow of the particles is redrawn at random.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Injection {
+    /// Rate of the slow average (0 < slow < fast ≤ 1).
+    pub alpha_slow: Real,
+    /// Rate of the fast average.
+    pub alpha_fast: Real,
 }
 
 /// One particle's correction.
@@ -104,4 +128,9 @@ pub struct Correction {
     pub log_likelihood: Real,
     /// Work spent (for SLAM: pose evaluations).
     pub evaluations: u32,
+    /// How well the reading fits, on a scale that does not grow with the
+    /// reading's size (for CGR: the log-likelihood per point); what
+    /// augmented MCL averages. Models without injection may repeat the
+    /// log-likelihood.
+    pub fit: Real,
 }

@@ -6,7 +6,15 @@
 use std::sync::Arc;
 
 use crate::geometry::{Pose2, Real};
+use rand::RngExt;
+
+use crate::pf::model::Injection;
 use crate::pf::resample::{Scheme, draw, normalize};
+use crate::pf::rng_for;
+
+/// Offset of the random streams that decide injections (slot j uses
+/// `INJECTION_STREAM + j`), apart from every particle's own stream.
+pub const INJECTION_STREAM: u64 = 1 << 40;
 
 /// A pose a particle held at a correcting reading, linked to its
 /// ancestor's.
@@ -37,6 +45,8 @@ pub struct Decision {
     pub best: usize,
     /// The normalized weights before resampling, by old slot.
     pub weights: Vec<Real>,
+    /// New slots to redraw at random (augmented MCL), in order.
+    pub fresh: Vec<usize>,
 }
 
 /// Weights and lineage of every particle slot.
@@ -49,6 +59,9 @@ pub struct Population {
     /// what "best particle" means, as in GMapping's `weightSum`.
     lineage_weights: Vec<Real>,
     nodes: Vec<Arc<Node>>,
+    /// log of augmented MCL's slow and fast averages of the mean
+    /// likelihood.
+    averages: Option<(Real, Real)>,
 }
 
 impl Population {
@@ -60,6 +73,7 @@ impl Population {
             log_weights: vec![0.0; n],
             lineage_weights: vec![0.0; n],
             nodes: poses.iter().map(|&pose| Arc::new(Node { stamp, pose, odometry, parent: None })).collect(),
+            averages: None,
         }
     }
 
@@ -77,6 +91,7 @@ impl Population {
     /// each slot's refined pose and log-likelihood, in slot order: weights,
     /// Neff, resampling by `scheme` below `threshold` × N (weights smoothed
     /// by `smoothing` × N), and the lineage extended by the new poses.
+    #[allow(clippy::too_many_arguments)]
     pub fn correct(
         &mut self,
         step: u64,
@@ -85,6 +100,7 @@ impl Population {
         smoothing: Real,
         threshold: Real,
         scheme: Scheme,
+        injection: Option<(Injection, &[Real])>,
     ) -> Decision {
         assert_eq!(reports.len(), self.len(), "one report per particle");
         for (slot, &(_, l)) in reports.iter().enumerate() {
@@ -106,7 +122,40 @@ impl Population {
         self.nodes = nodes;
         self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
         self.log_weights = if resampled { vec![0.0; n] } else { self.log_weights.clone() };
-        Decision { neff, parents, resampled, best: self.best(), weights }
+        let fresh = match injection {
+            Some((i, fits)) => self.fresh_slots(step, fits, i),
+            None => Vec::new(),
+        };
+        Decision { neff, parents, resampled, best: self.best(), weights, fresh }
+    }
+
+    /// Updates augmented MCL's averages with this reading's mean fit
+    /// (`fits`: each slot's log fit) and picks the new slots to redraw:
+    /// each with probability max(0, 1 − fast/slow), drawn per slot.
+    fn fresh_slots(&mut self, step: u64, fits: &[Real], i: Injection) -> Vec<usize> {
+        let n = fits.len() as Real;
+        let max = fits.iter().copied().fold(Real::NEG_INFINITY, Real::max);
+        if !max.is_finite() {
+            return Vec::new();
+        }
+        let log_mean = max + (fits.iter().map(|f| (f - max).exp()).sum::<Real>() / n).ln();
+        let blend = |old: Real, alpha: Real| {
+            let (a, b) = ((1.0 - alpha).ln() + old, alpha.ln() + log_mean);
+            let m = a.max(b);
+            m + ((a - m).exp() + (b - m).exp()).ln()
+        };
+        let (slow, fast) = match self.averages {
+            None => (log_mean, log_mean),
+            Some((slow, fast)) => (blend(slow, i.alpha_slow), blend(fast, i.alpha_fast)),
+        };
+        self.averages = Some((slow, fast));
+        let p = (1.0 - (fast - slow).exp()).max(0.0);
+        if p <= 0.0 {
+            return Vec::new();
+        }
+        (0..fits.len())
+            .filter(|&j| rng_for(self.seed, step, INJECTION_STREAM + j as u64).random::<Real>() < p)
+            .collect()
     }
 
     /// The slot with the highest lineage weight (the last of equals).
@@ -151,7 +200,7 @@ mod tests {
         let mut p = Population::start(&[at(0.0); 4], 7, 0.0, at(0.0));
         let reports: Vec<(Pose2, Real)> =
             [(1.0, -900.0), (2.0, 0.0), (3.0, -900.0), (4.0, -900.0)].map(|(x, l)| (at(x), l)).to_vec();
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance);
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None);
         assert!(d.resampled && d.neff < 2.0, "{d:?}");
         assert_eq!(d.parents, vec![1, 1, 1, 1]);
         assert_eq!(d.best, 3, "equal lineage weights: the last slot");
@@ -163,7 +212,7 @@ mod tests {
     fn without_resampling_weights_accumulate_and_slots_keep_their_parents() {
         let mut p = Population::start(&[at(0.0); 3], 7, 0.0, at(0.0));
         let reports = vec![(at(1.0), -1.0), (at(2.0), -1.1), (at(3.0), -1.2)];
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance);
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None);
         assert!(!d.resampled);
         assert_eq!((d.parents, d.best), (vec![0, 1, 2], 0));
         assert_eq!(p.lineage_weight(2), -1.2);
@@ -174,7 +223,49 @@ mod tests {
             3.0,
             0.5,
             Scheme::LowVariance,
+            None,
         );
         assert_eq!(d.best, 1);
+    }
+
+    #[test]
+    fn injection_starts_when_the_fit_drops_and_not_before() {
+        let mut p = Population::start(&[at(0.0); 200], 7, 0.0, at(0.0));
+        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5 });
+        let reports = vec![(at(1.0), -1.0); 200];
+        let correct = |p: &mut Population, step: u64, fit: Real| {
+            let fits = vec![fit; 200];
+            p.correct(
+                step,
+                (step as f64, at(0.0)),
+                &reports,
+                1.0 / 200.0,
+                0.5,
+                Scheme::LowVariance,
+                injection.map(|i| (i, &fits[..])),
+            )
+            .fresh
+        };
+        for step in 1..=20 {
+            assert!(correct(&mut p, step, -0.05).is_empty(), "a steady fit injects nothing");
+        }
+        // The fit per point drops by 0.7: fast/slow falls towards e^−0.7.
+        let mut fresh = Vec::new();
+        for step in 21..=30 {
+            fresh = correct(&mut p, step, -0.75);
+        }
+        let share = fresh.len() as Real / 200.0;
+        assert!(share > 0.2 && share < 0.7, "share injected {share}");
+        assert!(fresh.windows(2).all(|w| w[0] < w[1]), "fresh slots in order");
+        // Deterministic: the same history picks the same slots.
+        let mut q = Population::start(&[at(0.0); 200], 7, 0.0, at(0.0));
+        for step in 1..=20 {
+            correct(&mut q, step, -0.05);
+        }
+        let mut again = Vec::new();
+        for step in 21..=30 {
+            again = correct(&mut q, step, -0.75);
+        }
+        assert_eq!(fresh, again);
     }
 }

@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real};
 use crate::pf::model::{Correction, ParticleModel};
+use crate::pf::population::INJECTION_STREAM;
 use crate::pf::rng_for;
 
 /// One slot's correction, as sent to the resampler.
@@ -26,6 +27,8 @@ pub struct SlotReport {
     pub evaluations: u32,
     /// Bytes of its state (what moves if a child is placed elsewhere).
     pub bytes: u64,
+    /// The model's size-independent fit (see [`Correction::fit`]).
+    pub fit: Real,
 }
 
 /// The states one task holds, by slot.
@@ -100,9 +103,9 @@ impl<M: ParticleModel> Shard<M> {
         self.held
             .iter_mut()
             .map(|(slot, state)| {
-                let Correction { log_likelihood, evaluations } = model.correct(state, input, scratch);
+                let Correction { log_likelihood, evaluations, fit } = model.correct(state, input, scratch);
                 let (pose, bytes) = (model.pose(state), model.state_bytes(state));
-                SlotReport { slot: *slot, pose, log_likelihood, evaluations, bytes }
+                SlotReport { slot: *slot, pose, log_likelihood, evaluations, bytes, fit }
             })
             .collect()
     }
@@ -125,13 +128,17 @@ impl<M: ParticleModel> Shard<M> {
         parents.iter().zip(task_of).filter(|&(&p, &to)| to == self.task && self.state(p).is_none()).count()
     }
 
-    /// Takes up the new set after a decision: the new slots placed on this
-    /// task, copied from local parents or taken from `incoming` (new slot,
-    /// state). Fails, naming the slot, if a state is missing.
+    /// Takes up the new set after the decision for reading `step`: the new
+    /// slots placed on this task, copied from local parents or taken from
+    /// `incoming` (new slot, state), and the `fresh` ones (sorted) redrawn
+    /// by the model. Fails, naming the slot, if a state is missing.
     pub fn adopt(
         &mut self,
+        model: &M,
+        step: u64,
         parents: &[usize],
         task_of: &[usize],
+        fresh: &[usize],
         incoming: impl IntoIterator<Item = (usize, M::State)>,
     ) -> Result<(), String> {
         let mut received: Vec<(usize, Option<M::State>)> =
@@ -157,6 +164,11 @@ impl<M: ParticleModel> Shard<M> {
                 }
             };
             held.push((j, state));
+        }
+        for (slot, state) in &mut held {
+            if fresh.binary_search(slot).is_ok() {
+                model.inject(state, &mut rng_for(self.seed, step, INJECTION_STREAM + *slot as u64));
+            }
         }
         self.held = held;
         Ok(())
@@ -209,7 +221,8 @@ mod tests {
             s.push(s.last().unwrap() + c + rng.random::<f64>());
         }
         fn correct(&self, s: &mut Vec<f64>, input: &f64, (): &mut ()) -> Correction {
-            Correction { log_likelihood: -(s.last().unwrap() - input).powi(2), evaluations: 1 }
+            let log_likelihood = -(s.last().unwrap() - input).powi(2);
+            Correction { log_likelihood, evaluations: 1, fit: log_likelihood }
         }
         fn update(&self, _: &mut Vec<f64>, _: &f64) -> u64 {
             0
@@ -222,6 +235,9 @@ mod tests {
         }
         fn weight_smoothing(&self) -> Real {
             1.0
+        }
+        fn inject(&self, s: &mut Vec<f64>, _: &mut rand_chacha::ChaCha8Rng) {
+            *s = vec![-1.0];
         }
         fn resample_threshold(&self) -> Real {
             0.5
@@ -248,8 +264,8 @@ mod tests {
         assert_eq!(shards[1].expected_incoming(&parents, &task_of), 2);
         let to = |t: usize| sent.iter().flatten().filter(move |s| s.0 == t).map(|s| (s.1, s.2.clone()));
         let (in0, in1): (Vec<_>, Vec<_>) = (to(0).collect(), to(1).collect());
-        shards[0].adopt(&parents, &task_of, in0).unwrap();
-        shards[1].adopt(&parents, &task_of, in1).unwrap();
+        shards[0].adopt(&Walk, 1, &parents, &task_of, &[], in0).unwrap();
+        shards[1].adopt(&Walk, 1, &parents, &task_of, &[], in1).unwrap();
         for (j, &p) in parents.iter().enumerate() {
             assert_eq!(shards[task_of[j]].state(j), Some(&before[p]), "new slot {j}");
         }
@@ -257,9 +273,19 @@ mod tests {
     }
 
     #[test]
+    fn fresh_slots_are_redrawn_and_the_others_copied() {
+        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1, 2], &vec![0.5]);
+        shard.adopt(&Walk, 1, &[2, 2, 0], &[0, 0, 0], &[1], Vec::new()).unwrap();
+        assert_eq!(
+            shard.held().iter().map(|h| h.1.clone()).collect::<Vec<_>>(),
+            vec![vec![0.5], vec![-1.0], vec![0.5]]
+        );
+    }
+
+    #[test]
     fn a_missing_transfer_is_an_error_naming_the_slot() {
         let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0]);
-        let e = shard.adopt(&[0, 3], &[0, 0], Vec::new()).unwrap_err();
+        let e = shard.adopt(&Walk, 1, &[0, 3], &[0, 0], &[], Vec::new()).unwrap_err();
         assert!(e.contains("new slot 1") && e.contains("parent 3"), "{e}");
     }
 }

@@ -92,6 +92,7 @@ impl<M: HostedModel> Matcher<M> {
             smoothing: self.model.weight_smoothing(),
             threshold: self.model.resample_threshold(),
             scheme: self.model.resampling(),
+            injection: self.model.injection(),
             between,
             noise,
         }
@@ -174,7 +175,8 @@ impl<M: HostedModel> Matcher<M> {
             return Ok(());
         }
         out.record("particles_received", self.received.len() as u64);
-        shard.adopt(&parents, &task_of, self.received.drain(..))?;
+        let fresh: Vec<usize> = decision.fresh.iter().map(|&j| j as usize).collect();
+        shard.adopt(&self.model, decision.step, &parents, &task_of, &fresh, self.received.drain(..))?;
         let update_work = shard.update(&self.model, &pending.reading.input);
         let busy_us = pending.started.map_or(0, |s| s.elapsed().as_micros() as u64);
         out.record("update_us", busy_us);

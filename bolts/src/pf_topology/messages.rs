@@ -5,6 +5,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real};
+use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
@@ -39,6 +40,8 @@ pub struct Settings {
     pub threshold: Real,
     /// How the new set is drawn.
     pub scheme: Scheme,
+    /// Augmented MCL's averaging, if particles are injected.
+    pub injection: Option<Injection>,
     /// How the trajectory fills readings between corrections.
     pub between: BetweenScans,
     /// Odometry noise weights for that filling.
@@ -118,6 +121,8 @@ pub struct Decision {
     pub task_of: Vec<u32>,
     /// The best particle's new slot.
     pub best: u32,
+    /// New slots redrawn at random (augmented MCL), in order.
+    pub fresh: Vec<u32>,
 }
 
 /// Matcher task → matcher task (peer exchange): parents' states for new

@@ -149,8 +149,16 @@ impl Resampler {
         }
         let started = Instant::now();
         let poses: Vec<(Pose2, Real)> = slots.iter().map(|s| (s.pose, s.log_likelihood)).collect();
-        let d =
-            population.correct(g.step, mark, &poses, settings.smoothing, settings.threshold, settings.scheme);
+        let fits: Vec<Real> = slots.iter().map(|s| s.fit).collect();
+        let d = population.correct(
+            g.step,
+            mark,
+            &poses,
+            settings.smoothing,
+            settings.threshold,
+            settings.scheme,
+            settings.injection.map(|i| (i, &fits[..])),
+        );
         let tasks = self.tasks.unwrap_or(1);
         let task_of = if d.resampled {
             let placements: Vec<Placement> = d
@@ -181,7 +189,9 @@ impl Resampler {
             parents: d.parents.iter().map(|&p| p as u32).collect(),
             task_of: task_of.iter().map(|&t| t as u32).collect(),
             best: d.best as u32,
+            fresh: d.fresh.iter().map(|&j| j as u32).collect(),
         };
+        out.record("injected", d.fresh.len() as u64);
         self.task_of = task_of;
         self.marks.push(mark);
         out.emit("decision", decision).await?;

@@ -122,7 +122,7 @@ impl ParticleModel for SlamModel {
         let m = matcher.refine(&p.map, &p.pose, prepared, &self.options);
         // A climb that matched nothing leaves the pose where it was.
         p.pose = m.pose;
-        Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations }
+        Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations, fit: m.log_likelihood }
     }
 
     fn update(&self, p: &mut SlamParticle, input: &LaserReading) -> u64 {
