@@ -5,6 +5,7 @@
 //! progress: the particle model, the depth simulator and `squall localize`
 //! follow.
 
+pub mod depth_sim;
 pub mod fspf;
 pub mod measurement;
 pub mod model;
