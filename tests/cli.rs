@@ -721,3 +721,43 @@ fn global_localization_converges_within_ten_seconds() {
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&cache);
 }
+
+#[test]
+fn localize_with_a_simulated_depth_camera_tracks_through_fspf() {
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let (dir, cache) = (out_dir("localize-depth"), out_dir("localize-depth-scenes"));
+    let out = squall(&[
+        "localize",
+        "--map",
+        &map,
+        "--sim",
+        "--input",
+        "depth",
+        "--duration",
+        "5",
+        "--set",
+        &format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap())),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let tum = dir.join("trajectory.tum");
+    let truth = dir.join("ground_truth.tum");
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        tum.to_str().unwrap(),
+        "--ground-truth",
+        truth.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(v["pairs"].as_u64(), Some(50), "{v}");
+    assert!(v["ate_rmse"].as_f64().unwrap() < 0.05, "{v}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let points = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "points").unwrap();
+    assert!(points["custom"]["wall_points"]["p50"].as_u64().unwrap() > 300, "{points}");
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&cache);
+}

@@ -11,9 +11,14 @@ use std::sync::{Arc, Mutex, OnceLock};
 use serde::Deserialize;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tuple};
 
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::cgr::depth_sim::{DepthCamera, DepthFrame};
+use crate::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
 use crate::cgr::measurement::CgrOptions;
 use crate::cgr::model::{CgrModel, Init, LocalizeOptions};
-use crate::cgr::observation::Observation2d;
+use crate::cgr::observation::{CameraMount, Observation2d};
 use crate::cgr::scene_grid::SceneGrid;
 use crate::geometry::{Pose2, Real};
 use crate::linemap::LineMap;
@@ -59,6 +64,51 @@ impl Bolt for LaserPoints {
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         let scan = input.get::<LaserReading>().ok_or("cgr.laser takes LaserReading")?;
         out.emit("default", Observation2d::from_laser(scan, self.max_range)).await?;
+        Ok(())
+    }
+}
+
+/// `cgr.fspf`: each `DepthFrame` becomes an `Observation2d`: FSPF, then
+/// the plane points to the robot frame with floor and ceiling dropped
+/// (the camera of the `depth_sim` spout: D435, 0.8 m up, level).
+#[derive(Debug)]
+pub struct DepthPoints {
+    filter: PlaneFilter,
+    mount: CameraMount,
+    rng: ChaCha8Rng,
+    planes: PlaneFiltered,
+}
+
+impl DepthPoints {
+    /// Builds it (params: none yet; the seed is the topology's).
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        if !p.table().is_empty() {
+            return Err(ParamError::new("cgr.fspf takes no params yet (the D435 on the depth_sim robot)"));
+        }
+        let camera = DepthCamera::d435_on_robot();
+        Ok(DepthPoints {
+            filter: PlaneFilter::new(FspfOptions::default(), camera.intrinsics),
+            mount: camera.mount,
+            rng: ChaCha8Rng::seed_from_u64(p.seed() ^ 0xf5bf),
+            planes: PlaneFiltered::default(),
+        })
+    }
+}
+
+impl Bolt for DepthPoints {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<DepthFrame>().output::<Observation2d>("default");
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let frame = input.get::<DepthFrame>().ok_or("cgr.fspf takes DepthFrame")?;
+        let started = std::time::Instant::now();
+        self.filter.filter(&frame.image, &mut self.rng, &mut self.planes);
+        out.record("fspf_us", started.elapsed().as_micros() as u64);
+        let obs =
+            Observation2d::from_plane_filtered(&self.planes, &self.mount, 0.5, frame.stamp, frame.odometry);
+        out.record("wall_points", obs.points.len() as u64);
+        out.emit("default", obs).await?;
         Ok(())
     }
 }

@@ -2,6 +2,7 @@
 //! network ingest.
 
 pub mod carmen;
+pub mod depth;
 pub mod parfil;
 pub mod rosbag2;
 pub mod sim;
@@ -14,4 +15,5 @@ pub fn register(r: &mut Registry) {
     r.register_spout("carmen", carmen::CarmenSpout::from_params);
     r.register_spout("rosbag2", rosbag2::Rosbag2Spout::from_params);
     r.register_spout("parfil", parfil::ParfilSpout::from_params);
+    r.register_spout("depth_sim", depth::DepthSimSpout::from_params);
 }

@@ -22,6 +22,10 @@ pub(super) struct LocalizeArgs {
     /// Simulated seconds.
     #[arg(long, default_value_t = 120.0)]
     duration: f64,
+    /// The simulated sensor: `laser`, or `depth` (a D435-like camera,
+    /// plane filtered by FSPF).
+    #[arg(long, value_name = "laser|depth", default_value = "laser")]
+    input: String,
     /// Particles.
     #[arg(long, default_value_t = 50)]
     particles: usize,
@@ -68,15 +72,31 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         }
     };
     let map = args.map.to_string_lossy().to_string();
-    let mut sets = vec![
-        format!("topology.seed={}", args.seed),
-        format!("source.params.world={}", quoted(&map)),
-        format!("source.params.duration_secs={}", args.duration),
+    let mut sets = vec![format!("topology.seed={}", args.seed)];
+    match args.input.as_str() {
+        "laser" => {
+            sets.push(format!("source.params.world={}", quoted(&map)));
+            sets.push(format!("source.params.duration_secs={}", args.duration));
+        }
+        "depth" => {
+            sets.push("source.kind=\"depth_sim\"".into());
+            sets.push(format!(
+                "source.params={{ world = {}, duration_secs = {} }}",
+                quoted(&map),
+                args.duration
+            ));
+            sets.push("points.kind=\"cgr.fspf\"".into());
+            sets.push("points.params={}".into());
+            sets.push("points.inputs.0.stream=\"frame\"".into());
+        }
+        other => return Err(format!("--input must be laser or depth, got {other}")),
+    }
+    sets.extend([
         format!("matcher.parallelism={}", args.matchers),
         format!("matcher.params.map={}", quoted(&map)),
         format!("matcher.params.particles={}", args.particles),
         format!("matcher.params.resampling={}", quoted(scheme)),
-    ];
+    ]);
     match args.init.as_str() {
         "global" => sets.push("matcher.params.init=\"global\"".into()),
         "known" => {

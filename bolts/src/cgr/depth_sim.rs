@@ -14,6 +14,17 @@ use crate::geometry::{Pose2, Real};
 use crate::linemap::LineMap;
 use crate::slam::motion::standard_normal;
 
+/// A depth frame with the odometry at its instant.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DepthFrame {
+    /// Seconds.
+    pub stamp: f64,
+    /// The odometry pose then.
+    pub odometry: Pose2,
+    /// The image.
+    pub image: DepthImage,
+}
+
 /// A box standing on the floor (axis-aligned, metres).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Clutter {

@@ -34,7 +34,7 @@ impl Intrinsics {
 }
 
 /// A 16-bit depth image in millimetres (0: no data), row-major.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DepthImage {
     /// Pixels per row.
     pub width: usize,

@@ -183,6 +183,7 @@ pub fn register(r: &mut Registry) {
         })
     });
     r.register_bolt("cgr.laser", crate::cgr_topology::LaserPoints::from_params);
+    r.register_bolt("cgr.fspf", crate::cgr_topology::DepthPoints::from_params);
     r.register_bolt("pf.resampler", |p: &Params| {
         model_of(p)?;
         resampler::Resampler::from_params(p)
