@@ -17,6 +17,27 @@ pub fn normalize_angle(a: Real) -> Real {
     r
 }
 
+/// Where the ray from `origin` along `dir` meets the line through `a` and
+/// `b`: (distance along the ray in units of `dir`, position along a→b with
+/// 0 at `a` and 1 at `b`); `None` when they are parallel. The one
+/// intersection behind laser casting, observable scenes and depth
+/// rendering.
+#[inline]
+pub fn ray_line(
+    origin: (Real, Real),
+    dir: (Real, Real),
+    a: (Real, Real),
+    b: (Real, Real),
+) -> Option<(Real, Real)> {
+    let (ex, ey) = (b.0 - a.0, b.1 - a.1);
+    let denom = dir.0 * ey - dir.1 * ex;
+    if denom.abs() < 1e-12 {
+        return None;
+    }
+    let (ox, oy) = (a.0 - origin.0, a.1 - origin.1);
+    Some(((ox * ey - oy * ex) / denom, (ox * dir.1 - oy * dir.0) / denom))
+}
+
 /// A pose in the plane: position (m) and heading (rad, in (-π, π]).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Pose2 {

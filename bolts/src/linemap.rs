@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::geometry::Real;
+use crate::geometry::{Real, ray_line};
 use crate::textfile::{self, TextFileError};
 
 /// A wall from `a` to `b`, metres.
@@ -54,14 +54,7 @@ impl LineMap {
         let mut best = max_range;
         let mut hit = false;
         for w in &self.walls {
-            let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
-            let denom = dx * ey - dy * ex;
-            if denom.abs() < 1e-12 {
-                continue;
-            }
-            let (ox, oy) = (w.a.0 - origin.0, w.a.1 - origin.1);
-            let t = (ox * ey - oy * ex) / denom;
-            let u = (ox * dy - oy * dx) / denom;
+            let Some((t, u)) = ray_line(origin, (dx, dy), w.a, w.b) else { continue };
             if t > 1e-9 && t < best && (0.0..=1.0).contains(&u) {
                 best = t;
                 hit = true;

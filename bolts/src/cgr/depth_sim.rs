@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::cgr::fspf::{DepthImage, Intrinsics};
 use crate::cgr::observation::CameraMount;
 use crate::cgr::scene::observable_scene;
-use crate::geometry::{Pose2, Real};
+use crate::geometry::{Pose2, Real, ray_line};
 use crate::linemap::LineMap;
 use crate::slam::motion::standard_normal;
 
@@ -170,43 +170,27 @@ impl DepthCamera {
                 take((c - h) / d.2, d.2 / norm);
             }
         }
-        // Walls (vertical segments up to wall_height).
+        // A vertical face from `a` to `c`, floor to `top`.
+        let mut face = |a: (Real, Real), c: (Real, Real), top: Real| {
+            let Some((t, u)) = ray_line(eye, (d.0, d.1), a, c) else { return };
+            let z = h + t * d.2;
+            if (0.0..=1.0).contains(&u) && (0.0..=top).contains(&z) {
+                let (ex, ey) = (c.0 - a.0, c.1 - a.1);
+                take(t, ((d.0 * -ey + d.1 * ex) / (ex.hypot(ey) * norm)).abs());
+            }
+        };
         for &i in walls {
             let w = &map.walls[i as usize];
-            let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
-            let denom = d.0 * ey - d.1 * ex;
-            if denom.abs() < 1e-12 {
-                continue;
-            }
-            let (ox, oy) = (w.a.0 - eye.0, w.a.1 - eye.1);
-            let t = (ox * ey - oy * ex) / denom;
-            let u = (ox * d.1 - oy * d.0) / denom;
-            let z = h + t * d.2;
-            if (0.0..=1.0).contains(&u) && (0.0..=self.wall_height).contains(&z) {
-                let len = ex.hypot(ey);
-                let cos = ((d.0 * -ey + d.1 * ex) / (len * norm)).abs();
-                take(t, cos);
-            }
+            face(w.a, w.b, self.wall_height);
         }
         // Boxes: their four sides and their top.
         for b in clutter {
             let corners = [(b.min.0, b.min.1), (b.max.0, b.min.1), (b.max.0, b.max.1), (b.min.0, b.max.1)];
             for s in 0..4 {
-                let (a, c) = (corners[s], corners[(s + 1) % 4]);
-                let (ex, ey) = (c.0 - a.0, c.1 - a.1);
-                let denom = d.0 * ey - d.1 * ex;
-                if denom.abs() < 1e-12 {
-                    continue;
-                }
-                let (ox, oy) = (a.0 - eye.0, a.1 - eye.1);
-                let t = (ox * ey - oy * ex) / denom;
-                let u = (ox * d.1 - oy * d.0) / denom;
-                let z = h + t * d.2;
-                if (0.0..=1.0).contains(&u) && (0.0..=b.height).contains(&z) {
-                    let len = ex.hypot(ey);
-                    take(t, ((d.0 * -ey + d.1 * ex) / (len * norm)).abs());
-                }
+                face(corners[s], corners[(s + 1) % 4], b.height);
             }
+        }
+        for b in clutter {
             if d.2 < 0.0 && h > b.height {
                 let t = (b.height - h) / d.2;
                 let (x, y) = (eye.0 + t * d.0, eye.1 + t * d.1);

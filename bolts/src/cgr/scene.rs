@@ -5,7 +5,7 @@
 //! everything (it is in front over the whole wall), one end, or the middle,
 //! which splits the wall in two (the four cases of the thesis's Fig. 4.2).
 
-use crate::geometry::{Real, normalize_angle};
+use crate::geometry::{Real, normalize_angle, ray_line};
 use crate::linemap::LineMap;
 
 /// Pieces shorter than this (metres) are dropped.
@@ -38,17 +38,8 @@ pub fn distance_to_segment(p: (Real, Real), a: (Real, Real), b: (Real, Real)) ->
 
 /// Where the ray from `x` at angle `phi` meets the line through `a` and
 /// `b`: (distance along the ray, parameter along a→b), if it does ahead.
-fn ray_line(x: (Real, Real), phi: Real, a: (Real, Real), b: (Real, Real)) -> Option<(Real, Real)> {
-    let (dx, dy) = (phi.cos(), phi.sin());
-    let (ex, ey) = (b.0 - a.0, b.1 - a.1);
-    let denom = dx * ey - dy * ex;
-    if denom.abs() < 1e-15 {
-        return None;
-    }
-    let (ox, oy) = (a.0 - x.0, a.1 - x.1);
-    let r = (ox * ey - oy * ex) / denom;
-    let t = (ox * dy - oy * dx) / denom;
-    (r > 0.0).then_some((r, t))
+fn ray_at(x: (Real, Real), phi: Real, a: (Real, Real), b: (Real, Real)) -> Option<(Real, Real)> {
+    ray_line(x, (phi.cos(), phi.sin()), a, b).filter(|&(r, _)| r > 0.0)
 }
 
 /// The angle of `p` seen from `x`.
@@ -97,8 +88,7 @@ pub fn trim_occlusion(x: (Real, Real), l1: Visible, l2: &Visible) -> Vec<Visible
     let mut hidden: Option<(Real, Real)> = None;
     for w in cuts.windows(2) {
         let mid = alpha + 0.5 * (w[0] + w[1]);
-        let (Some((r1, _)), Some((r2, t2))) = (ray_line(x, mid, l1.a, l1.b), ray_line(x, mid, l2.a, l2.b))
-        else {
+        let (Some((r1, _)), Some((r2, t2))) = (ray_at(x, mid, l1.a, l1.b), ray_at(x, mid, l2.a, l2.b)) else {
             continue;
         };
         if r2 < r1 && (-1e-9..=1.0 + 1e-9).contains(&t2) {
@@ -110,7 +100,7 @@ pub fn trim_occlusion(x: (Real, Real), l1: Visible, l2: &Visible) -> Vec<Visible
     }
     let Some((s, e)) = hidden else { return vec![original] };
     let point_at = |phi: Real| -> (Real, Real) {
-        match ray_line(x, alpha + phi, l1.a, l1.b) {
+        match ray_at(x, alpha + phi, l1.a, l1.b) {
             Some((_, t)) => {
                 let t = t.clamp(0.0, 1.0);
                 (l1.a.0 + t * (l1.b.0 - l1.a.0), l1.a.1 + t * (l1.b.1 - l1.a.1))
@@ -134,14 +124,7 @@ pub fn trim_occlusion(x: (Real, Real), l1: Visible, l2: &Visible) -> Vec<Visible
 /// Where segments `a`–`b` and `c`–`d` cross, if they properly do.
 fn crossing(a: (Real, Real), b: (Real, Real), c: (Real, Real), d: (Real, Real)) -> Option<(Real, Real)> {
     let (ex, ey) = (b.0 - a.0, b.1 - a.1);
-    let (fx, fy) = (d.0 - c.0, d.1 - c.1);
-    let denom = ex * fy - ey * fx;
-    if denom.abs() < 1e-15 {
-        return None;
-    }
-    let (ox, oy) = (c.0 - a.0, c.1 - a.1);
-    let t = (ox * fy - oy * fx) / denom;
-    let u = (ox * ey - oy * ex) / denom;
+    let (t, u) = ray_line(a, (ex, ey), c, d)?;
     (t > 1e-9 && t < 1.0 - 1e-9 && u > 1e-9 && u < 1.0 - 1e-9).then_some((a.0 + t * ex, a.1 + t * ey))
 }
 
@@ -200,14 +183,7 @@ pub fn first_hit(
     let mut best: Option<(u32, Real)> = None;
     for i in lines {
         let w = &map.walls[i as usize];
-        let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
-        let denom = dx * ey - dy * ex;
-        if denom.abs() < 1e-15 {
-            continue;
-        }
-        let (ox, oy) = (w.a.0 - x.0, w.a.1 - x.1);
-        let r = (ox * ey - oy * ex) / denom;
-        let u = (ox * dy - oy * dx) / denom;
+        let Some((r, u)) = ray_line(x, (dx, dy), w.a, w.b) else { continue };
         if r > 0.0 && (0.0..=1.0).contains(&u) && best.is_none_or(|b| r < b.1) {
             best = Some((i, r));
         }
