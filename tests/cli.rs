@@ -559,17 +559,6 @@ fn speedup_runs_every_configuration_and_writes_a_table_csv_and_plot() {
 
 #[test]
 fn parfil_runs_on_the_particle_filter_topology_and_finds_the_robot() {
-    let read_tum = |path: &Path| -> Vec<(f64, f64)> {
-        std::fs::read_to_string(path)
-            .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('#'))
-            .map(|l| {
-                let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-                (v[1], v[2])
-            })
-            .collect()
-    };
     let mut last = Vec::new();
     for k in ["1", "2"] {
         let dir = out_dir(&format!("parfil-k{k}"));
@@ -584,7 +573,7 @@ fn parfil_runs_on_the_particle_filter_topology_and_finds_the_robot() {
             dir.to_str().unwrap(),
         ]);
         assert!(out.status.success(), "{}", text(&out.stderr));
-        let (estimate, truth) = (read_tum(&dir.join("trajectory.tum")), read_tum(&dir.join("truth.tum")));
+        let (estimate, truth) = (tum_xy(&dir.join("trajectory.tum")), tum_xy(&dir.join("truth.tum")));
         assert_eq!((estimate.len(), truth.len()), (501, 501));
         // Distance in the wrap-around room of 100 m × 100 m.
         let wrapped = |a: f64, b: f64| {
@@ -596,7 +585,7 @@ fn parfil_runs_on_the_particle_filter_topology_and_finds_the_robot() {
         let mut errors: Vec<f64> = estimate[400..]
             .iter()
             .zip(&truth[400..])
-            .map(|(&(ex, ey), &(tx, ty))| wrapped(ex, tx).hypot(wrapped(ey, ty)))
+            .map(|(&(_, ex, ey), &(_, tx, ty))| wrapped(ex, tx).hypot(wrapped(ey, ty)))
             .collect();
         errors.sort_by(f64::total_cmp);
         let median = errors[errors.len() / 2];
@@ -611,37 +600,11 @@ fn parfil_runs_on_the_particle_filter_topology_and_finds_the_robot() {
 fn localize_tracks_a_simulated_robot_in_a_real_building_map() {
     let map = shared_data("linemaps/CVAP7_vector.txt");
     let cache = out_dir("localize-scenes");
-    let run = |k: &str, dir: &Path| {
-        let out = squall(&[
-            "localize",
-            "--map",
-            &map,
-            "--sim",
-            "--duration",
-            "30",
-            "--matchers",
-            k,
-            "--set",
-            &format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap())),
-            "--out",
-            dir.to_str().unwrap(),
-        ]);
-        assert!(out.status.success(), "{}", text(&out.stderr));
-    };
     let (one, two) = (out_dir("localize-k1"), out_dir("localize-k2"));
-    run("1", &one);
-    run("2", &two);
+    localize(&map, &one, &cache, &["--duration", "30", "--matchers", "1"]);
+    localize(&map, &two, &cache, &["--duration", "30", "--matchers", "2"]);
     let tum = one.join("trajectory.tum");
-    let truth = one.join("ground_truth.tum");
-    let out = squall(&[
-        "eval",
-        "--trajectory",
-        tum.to_str().unwrap(),
-        "--ground-truth",
-        truth.to_str().unwrap(),
-        "--json",
-    ]);
-    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    let v = against_ground_truth(&one);
     let ate = v["ate_rmse"].as_f64().unwrap_or_else(|| panic!("no ATE in {v}"));
     assert!(ate < 0.05, "ATE {ate} m");
     assert!(
@@ -664,39 +627,50 @@ fn toml_string(s: &str) -> String {
     format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
 }
 
+/// Runs `squall localize --sim` on `map` into `dir` with `args`, the scene
+/// cache in `cache`; it must succeed.
+fn localize(map: &str, dir: &Path, cache: &Path, args: &[&str]) {
+    let cache_dir = format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap()));
+    let mut all =
+        vec!["localize", "--map", map, "--sim", "--set", &cache_dir, "--out", dir.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let out = squall(&all);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+}
+
+/// `squall eval --json` of `dir`'s trajectory against its ground truth.
+fn against_ground_truth(dir: &Path) -> serde_json::Value {
+    let (tum, truth) = (dir.join("trajectory.tum"), dir.join("ground_truth.tum"));
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        tum.to_str().unwrap(),
+        "--ground-truth",
+        truth.to_str().unwrap(),
+        "--json",
+    ]);
+    serde_json::from_str(&text(&out.stdout)).unwrap()
+}
+
+/// (stamp, x, y) of every pose of a TUM file.
+fn tum_xy(path: &Path) -> Vec<(f64, f64, f64)> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            (v[0], v[1], v[2])
+        })
+        .collect()
+}
+
 #[test]
 fn global_localization_converges_within_ten_seconds() {
     let map = shared_data("linemaps/CVAP7_vector.txt");
     let (dir, cache) = (out_dir("localize-global"), out_dir("localize-global-scenes"));
-    let out = squall(&[
-        "localize",
-        "--map",
-        &map,
-        "--sim",
-        "--duration",
-        "15",
-        "--init",
-        "global",
-        "--particles",
-        "500",
-        "--set",
-        &format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap())),
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let read = |f: &str| -> Vec<(f64, f64, f64)> {
-        std::fs::read_to_string(dir.join(f))
-            .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('#'))
-            .map(|l| {
-                let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-                (v[0], v[1], v[2])
-            })
-            .collect()
-    };
-    let (estimate, truth) = (read("trajectory.tum"), read("ground_truth.tum"));
+    localize(&map, &dir, &cache, &["--duration", "15", "--init", "global", "--particles", "500"]);
+    let (estimate, truth) = (tum_xy(&dir.join("trajectory.tum")), tum_xy(&dir.join("ground_truth.tum")));
     assert_eq!(estimate.len(), truth.len());
     let t0 = truth[0].0;
     let first_error = (estimate[0].1 - truth[0].1).hypot(estimate[0].2 - truth[0].2);
@@ -726,32 +700,8 @@ fn global_localization_converges_within_ten_seconds() {
 fn localize_with_a_simulated_depth_camera_tracks_through_fspf() {
     let map = shared_data("linemaps/CVAP7_vector.txt");
     let (dir, cache) = (out_dir("localize-depth"), out_dir("localize-depth-scenes"));
-    let out = squall(&[
-        "localize",
-        "--map",
-        &map,
-        "--sim",
-        "--input",
-        "depth",
-        "--duration",
-        "5",
-        "--set",
-        &format!("matcher.params.cache_dir={}", toml_string(cache.to_str().unwrap())),
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let tum = dir.join("trajectory.tum");
-    let truth = dir.join("ground_truth.tum");
-    let out = squall(&[
-        "eval",
-        "--trajectory",
-        tum.to_str().unwrap(),
-        "--ground-truth",
-        truth.to_str().unwrap(),
-        "--json",
-    ]);
-    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    localize(&map, &dir, &cache, &["--input", "depth", "--duration", "5"]);
+    let v = against_ground_truth(&dir);
     assert_eq!(v["pairs"].as_u64(), Some(50), "{v}");
     assert!(v["ate_rmse"].as_f64().unwrap() < 0.05, "{v}");
     let m: serde_json::Value =

@@ -24,6 +24,7 @@ use crate::geometry::{Pose2, Real};
 use crate::linemap::LineMap;
 use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
+use crate::pf_topology::from_table;
 use crate::sensor::LaserReading;
 use crate::slam::motion::MotionNoise;
 
@@ -113,107 +114,75 @@ impl Bolt for DepthPoints {
     }
 }
 
-/// The `cgr` model's params.
+/// The `cgr` model's params, flat; any left out takes the default of
+/// [`LocalizeOptions`] / [`CgrOptions`].
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 struct CgrParams {
-    /// The line-map file.
+    /// The line-map file (required).
     map: PathBuf,
-    #[serde(default = "default_particles")]
     particles: usize,
     /// `"known"` (then `start` = [x, y, θ]) or `"global"`.
-    #[serde(default = "default_init")]
     init: String,
     start: Option<[Real; 3]>,
-    #[serde(default)]
     resampling: Scheme,
-    #[serde(default = "default_threshold")]
     resample_threshold: Real,
-    /// `"grid"` (precomputed, the default) or `"on_demand"`.
-    #[serde(default = "default_scenes")]
+    /// `"grid"` (precomputed) or `"on_demand"`.
     scenes: String,
-    #[serde(default = "default_cell")]
     cell: Real,
     /// Where precomputed scenes are cached (default: the system's
     /// temporary folder, `squall-scenes`).
     cache_dir: Option<PathBuf>,
-    #[serde(default = "default_sigma")]
     sigma: Real,
-    #[serde(default = "default_correlation")]
     correlation: Real,
-    #[serde(default = "default_normal_tolerance")]
     normal_tolerance_deg: Real,
-    #[serde(default = "default_range")]
     range: Real,
-    #[serde(default = "default_refine")]
     refine_iterations: u32,
-    #[serde(default = "default_outlier")]
     outlier_sigmas: Real,
     /// Augmented MCL (random particles when observations stop fitting):
     /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`.
-    #[serde(default)]
     injection: bool,
-    #[serde(default = "default_alpha_slow")]
     alpha_slow: Real,
-    #[serde(default = "default_alpha_fast")]
     alpha_fast: Real,
-    #[serde(default = "default_srr")]
     srr: Real,
-    #[serde(default = "default_srt")]
     srt: Real,
-    #[serde(default = "default_str")]
     str: Real,
-    #[serde(default = "default_stt")]
     stt: Real,
 }
 
-fn default_particles() -> usize {
-    50
-}
-fn default_init() -> String {
-    "global".into()
-}
-fn default_threshold() -> Real {
-    0.5
-}
-fn default_scenes() -> String {
-    "grid".into()
-}
-fn default_cell() -> Real {
-    0.2
-}
-fn default_sigma() -> Real {
-    CgrOptions::default().sigma
-}
-fn default_correlation() -> Real {
-    CgrOptions::default().correlation
-}
-fn default_normal_tolerance() -> Real {
-    CgrOptions::default().normal_tolerance_deg
-}
-fn default_refine() -> u32 {
-    CgrOptions::default().refine_iterations
-}
-fn default_alpha_slow() -> Real {
-    0.01
-}
-fn default_alpha_fast() -> Real {
-    0.3
-}
-fn default_outlier() -> Real {
-    CgrOptions::default().outlier_sigmas
-}
-fn default_srr() -> Real {
-    0.1
-}
-fn default_srt() -> Real {
-    0.2
-}
-fn default_str() -> Real {
-    0.1
-}
-fn default_stt() -> Real {
-    0.2
+/// Augmented MCL's rates when `injection = true` and none are given.
+const DEFAULT_INJECTION: Injection = Injection { alpha_slow: 0.01, alpha_fast: 0.3 };
+
+impl Default for CgrParams {
+    fn default() -> Self {
+        let o = LocalizeOptions::default();
+        let (c, m) = (&o.cgr, o.motion);
+        let injection = o.injection.unwrap_or(DEFAULT_INJECTION);
+        CgrParams {
+            map: PathBuf::new(),
+            particles: o.particles,
+            init: "global".into(),
+            start: None,
+            resampling: o.resampling,
+            resample_threshold: o.resample_threshold,
+            scenes: "grid".into(),
+            cell: 0.2,
+            cache_dir: None,
+            sigma: c.sigma,
+            correlation: c.correlation,
+            normal_tolerance_deg: c.normal_tolerance_deg,
+            range: c.range,
+            refine_iterations: c.refine_iterations,
+            outlier_sigmas: c.outlier_sigmas,
+            injection: o.injection.is_some(),
+            alpha_slow: injection.alpha_slow,
+            alpha_fast: injection.alpha_fast,
+            srr: m.srr,
+            srt: m.srt,
+            str: m.str,
+            stt: m.stt,
+        }
+    }
 }
 
 /// Scene grids built in this process, by cache key: every matcher task
@@ -245,9 +214,10 @@ fn shared_grid(
 /// The `cgr` model from the matcher's params (without `model` and
 /// `map_interval`).
 pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
-    let p: CgrParams = toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| e.to_string().trim().to_string())?;
+    let p: CgrParams = from_table(table)?;
+    if p.map.as_os_str().is_empty() {
+        return Err("`map` (a line-map file) is required".into());
+    }
     let init = match (p.init.as_str(), p.start) {
         ("global", _) => Init::Global,
         ("known", Some([x, y, theta])) => Init::Known(Pose2::new(x, y, theta)),

@@ -210,10 +210,6 @@ impl ParticleModel for ParfilModel {
         Correction { log_likelihood, evaluations: 1, fit: log_likelihood }
     }
 
-    fn update(&self, _: &mut Pose2, _: &ParfilReading) -> u64 {
-        0
-    }
-
     fn pose(&self, pose: &Pose2) -> Pose2 {
         *pose
     }

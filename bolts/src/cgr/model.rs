@@ -174,10 +174,6 @@ impl ParticleModel for CgrModel {
         Correction { log_likelihood: e.log_likelihood, evaluations, fit: e.log_likelihood / points }
     }
 
-    fn update(&self, _: &mut Pose2, _: &Observation2d) -> u64 {
-        0
-    }
-
     fn pose(&self, pose: &Pose2) -> Pose2 {
         *pose
     }

@@ -123,31 +123,35 @@ where
             model.injection().map(|i| (i, &fits[..])),
         );
         let parents = &decision.parents;
-        let (task_of, moved_now) = if decision.resampled {
+        // Without resampling every particle stays where it is.
+        let (placed, moved_now) = if decision.resampled {
             let placements: Vec<Placement> = parents
                 .iter()
                 .map(|&p| Placement { home: self.task_of[p], bytes: reports[p].bytes })
                 .collect();
             let task_of = assign(&placements, self.tasks);
             let m = moved(&placements, &task_of);
-            (task_of, m)
+            (Some(task_of), m)
         } else {
-            (self.task_of.clone(), Moved::default())
+            (None, Moved::default())
         };
+        let task_of = placed.as_deref().unwrap_or(&self.task_of);
         // Peer exchange, in one thread: every shard's outgoing states go to
         // their task's inbox before anyone adopts.
         let mut inboxes: Vec<Vec<(usize, M::State)>> = vec![Vec::new(); self.tasks];
         for shard in &self.shards {
-            for (to, slot, state) in shard.outgoing(parents, &task_of) {
+            for (to, slot, state) in shard.outgoing(parents, task_of) {
                 inboxes[to].push((slot, state));
             }
         }
         for (shard, inbox) in self.shards.iter_mut().zip(inboxes) {
             shard
-                .adopt(model, self.step, parents, &task_of, &decision.fresh, inbox)
+                .adopt(model, self.step, parents, task_of, &decision.fresh, inbox)
                 .expect("every parent is held by some shard");
         }
-        self.task_of = task_of;
+        if let Some(task_of) = placed {
+            self.task_of = task_of;
+        }
         let update_work = self.shards.iter_mut().map(|s| s.update(model, input)).sum();
         StepReport {
             evaluations: reports.iter().map(|r| r.evaluations).collect(),

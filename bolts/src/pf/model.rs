@@ -70,8 +70,12 @@ pub trait ParticleModel: Send + Sync + 'static {
     ) -> Correction;
 
     /// Adds a correcting reading to a particle after resampling; returns
-    /// the work counted (for SLAM: map tiles cloned).
-    fn update(&self, state: &mut Self::State, input: &Self::Input) -> u64;
+    /// the work counted (for SLAM: map tiles cloned). The default, for
+    /// models whose state is only a pose, does nothing.
+    fn update(&self, state: &mut Self::State, input: &Self::Input) -> u64 {
+        let _ = (state, input);
+        0
+    }
 
     /// The particle's pose, for outputs and the lineage.
     fn pose(&self, state: &Self::State) -> Pose2;

@@ -120,8 +120,10 @@ impl Population {
             })
             .collect();
         self.nodes = nodes;
-        self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
-        self.log_weights = if resampled { vec![0.0; n] } else { self.log_weights.clone() };
+        if resampled {
+            self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
+            self.log_weights.fill(0.0);
+        }
         let fresh = match injection {
             Some((i, fits)) => self.fresh_slots(step, fits, i),
             None => Vec::new(),

@@ -144,26 +144,37 @@ impl<M: ParticleModel> Shard<M> {
         let mut received: Vec<(usize, Option<M::State>)> =
             incoming.into_iter().map(|(j, s)| (j, Some(s))).collect();
         received.sort_by_key(|r| r.0);
+        let local = |p: usize| self.held.binary_search_by_key(&p, |h| h.0).ok();
+        // Every state must be at hand before anything moves; and local
+        // parents' children are counted, so that a parent's state moves to
+        // its last child and is cloned only for the others (without
+        // resampling nothing is cloned).
+        let mut children = vec![0usize; self.held.len()];
+        for (j, (&p, &to)) in parents.iter().zip(task_of).enumerate() {
+            if to != self.task {
+                continue;
+            }
+            match local(p) {
+                Some(i) => children[i] += 1,
+                None if received.binary_search_by_key(&j, |r| r.0).is_ok() => {}
+                None => return Err(format!("task {}: no state for new slot {j} (parent {p})", self.task)),
+            }
+        }
+        let (slots, mut old): (Vec<usize>, Vec<Option<M::State>>) =
+            std::mem::take(&mut self.held).into_iter().map(|(slot, s)| (slot, Some(s))).unzip();
         let mut held = Vec::with_capacity(task_of.iter().filter(|&&t| t == self.task).count());
         for (j, (&p, &to)) in parents.iter().zip(task_of).enumerate() {
             if to != self.task {
                 continue;
             }
-            let state = match self.state(p) {
-                Some(s) => s.clone(),
-                None => {
-                    match received.binary_search_by_key(&j, |r| r.0).ok().and_then(|i| received[i].1.take()) {
-                        Some(s) => s,
-                        None => {
-                            return Err(format!(
-                                "task {}: no state for new slot {j} (parent {p})",
-                                self.task
-                            ));
-                        }
-                    }
+            let state = match slots.binary_search(&p).ok() {
+                Some(i) => {
+                    children[i] -= 1;
+                    if children[i] == 0 { old[i].take() } else { old[i].clone() }
                 }
+                None => received.binary_search_by_key(&j, |r| r.0).ok().and_then(|i| received[i].1.take()),
             };
-            held.push((j, state));
+            held.push((j, state.expect("checked above")));
         }
         for (slot, state) in &mut held {
             if fresh.binary_search(slot).is_ok() {
@@ -223,9 +234,6 @@ mod tests {
         fn correct(&self, s: &mut Vec<f64>, input: &f64, (): &mut ()) -> Correction {
             let log_likelihood = -(s.last().unwrap() - input).powi(2);
             Correction { log_likelihood, evaluations: 1, fit: log_likelihood }
-        }
-        fn update(&self, _: &mut Vec<f64>, _: &f64) -> u64 {
-            0
         }
         fn pose(&self, s: &Vec<f64>) -> Pose2 {
             Pose2::new(*s.last().unwrap(), 0.0, 0.0)

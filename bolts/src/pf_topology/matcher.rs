@@ -25,9 +25,21 @@ use crate::pf_topology::messages::{Decision, Reading, Report, Settings, Transfer
 #[derive(Debug)]
 struct Pending<I> {
     reading: Arc<Reading<I>>,
-    decision: Option<Arc<Decision>>,
-    sent: bool,
-    started: Option<Instant>,
+    /// The resampler's decision, once it has come and this task's
+    /// transfers are sent.
+    plan: Option<Plan>,
+}
+
+/// A decision as this task carries it out.
+#[derive(Debug)]
+struct Plan {
+    parents: Vec<usize>,
+    task_of: Vec<usize>,
+    fresh: Vec<usize>,
+    best: usize,
+    /// States this task must receive before it can adopt the new set.
+    expected: usize,
+    started: Instant,
 }
 
 /// The matcher for model `M`.
@@ -146,44 +158,56 @@ impl<M: HostedModel> Matcher<M> {
         for s in &slots {
             out.record("evaluations_per_particle", u64::from(s.evaluations));
         }
-        let settings = self.settings();
-        out.emit("report", Report::Corrected { step, task, tasks, mark, slots, busy_us, settings }).await?;
-        self.pending = Some(Pending { reading, decision: None, sent: false, started: None });
+        out.emit("report", Report::Corrected { step, task, tasks, mark, slots, busy_us }).await?;
+        self.pending = Some(Pending { reading, plan: None });
         Ok(())
     }
 
-    /// Carries out the pending decision as far as the transfers received
-    /// allow.
-    async fn advance(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
-        let Some(pending) = self.pending.as_mut() else { return Ok(()) };
-        let Some(decision) = pending.decision.clone() else { return Ok(()) };
-        let shard = self.shard.as_mut().ok_or("pf.matcher: no particles yet")?;
+    /// Takes the resampler's decision for the pending correction: sends
+    /// the parents' states other tasks need, straight to them.
+    async fn plan(&mut self, decision: &Decision, out: &mut Emitter) -> Result<(), BoxError> {
+        let pending = self.pending.as_mut().ok_or("pf.matcher: a decision with no correction pending")?;
+        if decision.step != pending.reading.step {
+            let (got, want) = (decision.step, pending.reading.step);
+            return Err(format!("pf.matcher: decision for reading {got} while {want} is pending").into());
+        }
+        let shard = self.shard.as_ref().ok_or("pf.matcher: no particles yet")?;
+        let started = Instant::now();
         let parents: Vec<usize> = decision.parents.iter().map(|&p| p as usize).collect();
         let task_of: Vec<usize> = decision.task_of.iter().map(|&t| t as usize).collect();
-        if !pending.sent {
-            pending.started = Some(Instant::now());
-            let mut by_task: Vec<Vec<(u32, M::State)>> = (0..self.tasks).map(|_| Vec::new()).collect();
-            for (to, slot, state) in shard.outgoing(&parents, &task_of) {
-                by_task[to].push((slot as u32, state));
-            }
-            for (to, states) in by_task.into_iter().enumerate().filter(|(_, s)| !s.is_empty()) {
-                out.send_peer(to, Transfer { step: decision.step, states }).await?;
-            }
-            pending.sent = true;
+        let mut by_task: Vec<Vec<(u32, M::State)>> = (0..self.tasks).map(|_| Vec::new()).collect();
+        for (to, slot, state) in shard.outgoing(&parents, &task_of) {
+            by_task[to].push((slot as u32, state));
         }
-        if self.received.len() < shard.expected_incoming(&parents, &task_of) {
+        for (to, states) in by_task.into_iter().enumerate().filter(|(_, s)| !s.is_empty()) {
+            out.send_peer(to, Transfer { step: decision.step, states }).await?;
+        }
+        let expected = shard.expected_incoming(&parents, &task_of);
+        let fresh = decision.fresh.iter().map(|&j| j as usize).collect();
+        let best = decision.best as usize;
+        pending.plan = Some(Plan { parents, task_of, fresh, best, expected, started });
+        Ok(())
+    }
+
+    /// Finishes the pending correction once its decision is planned and
+    /// every transfer it waits for has come: adopts the new set and
+    /// updates it with the reading.
+    async fn advance(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        let Some(Pending { plan: Some(plan), .. }) = &self.pending else { return Ok(()) };
+        if self.received.len() < plan.expected {
             return Ok(());
         }
+        let Some(Pending { reading, plan: Some(plan) }) = self.pending.take() else { return Ok(()) };
+        let shard = self.shard.as_mut().ok_or("pf.matcher: no particles yet")?;
         out.record("particles_received", self.received.len() as u64);
-        let fresh: Vec<usize> = decision.fresh.iter().map(|&j| j as usize).collect();
-        shard.adopt(&self.model, decision.step, &parents, &task_of, &fresh, self.received.drain(..))?;
-        let update_work = shard.update(&self.model, &pending.reading.input);
-        let busy_us = pending.started.map_or(0, |s| s.elapsed().as_micros() as u64);
+        let step = reading.step;
+        shard.adopt(&self.model, step, &plan.parents, &plan.task_of, &plan.fresh, self.received.drain(..))?;
+        let update_work = shard.update(&self.model, &reading.input);
+        let busy_us = plan.started.elapsed().as_micros() as u64;
         out.record("update_us", busy_us);
-        self.best = decision.best as usize;
-        let (step, task, tasks) = (decision.step, self.task as u32, self.tasks as u32);
+        self.best = plan.best;
+        let (task, tasks) = (self.task as u32, self.tasks as u32);
         out.emit("report", Report::Updated { step, task, tasks, busy_us, update_work }).await?;
-        self.pending = None;
         self.corrected(out).await
     }
 
@@ -231,15 +255,7 @@ impl<M: HostedModel> Bolt for Matcher<M> {
         };
         let input = match input.into_arc::<Decision>() {
             Ok(decision) => {
-                let pending =
-                    self.pending.as_mut().ok_or("pf.matcher: a decision with no correction pending")?;
-                if decision.step != pending.reading.step {
-                    let (got, want) = (decision.step, pending.reading.step);
-                    return Err(
-                        format!("pf.matcher: decision for reading {got} while {want} is pending").into()
-                    );
-                }
-                pending.decision = Some(decision);
+                self.plan(&decision, out).await?;
                 self.advance(out).await?;
                 return self.pump(out).await;
             }

@@ -30,8 +30,8 @@ pub struct Ready {
     pub corrected: bool,
 }
 
-/// What the resampler needs of the model, sent by the matchers (which
-/// hold the model's settings) with every correction.
+/// What the resampler needs of the model, sent once by the matchers
+/// (which hold the model's settings) when they start.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Settings {
     /// Weights are smoothed by dividing log-weights by this × N.
@@ -91,8 +91,6 @@ pub enum Report {
         slots: Vec<SlotReport>,
         /// Microseconds the task spent correcting.
         busy_us: u64,
-        /// The model's resampling settings.
-        settings: Settings,
     },
     /// The task adopted the new set and updated it with the reading.
     Updated {

@@ -61,10 +61,7 @@ impl HostedModel for SlamModel {
     type Snapshot = OccupancyGrid;
 
     fn from_table(table: toml::Table) -> Result<Self, String> {
-        let options: SlamOptions = toml::Value::Table(table)
-            .try_into()
-            .map_err(|e: toml::de::Error| e.to_string().trim().to_string())?;
-        SlamModel::new(options)
+        SlamModel::new(from_table::<SlamOptions>(table)?)
     }
 
     fn snapshot(&self, state: &SlamParticle) -> OccupancyGrid {
@@ -80,10 +77,7 @@ impl HostedModel for ParfilModel {
     type Snapshot = Pose2;
 
     fn from_table(table: toml::Table) -> Result<Self, String> {
-        let options: ParfilOptions = toml::Value::Table(table)
-            .try_into()
-            .map_err(|e: toml::de::Error| e.to_string().trim().to_string())?;
-        ParfilModel::new(options)
+        ParfilModel::new(from_table::<ParfilOptions>(table)?)
     }
 
     fn snapshot(&self, state: &Pose2) -> Pose2 {
@@ -101,6 +95,12 @@ impl HostedModel for CgrModel {
     fn snapshot(&self, state: &Pose2) -> Pose2 {
         *state
     }
+}
+
+/// A settings struct from a component's params table; the error is the
+/// TOML decoder's message (it names the key).
+pub(crate) fn from_table<T: serde::de::DeserializeOwned>(table: toml::Table) -> Result<T, String> {
+    toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| e.to_string().trim().to_string())
 }
 
 /// The models the kinds know, by their `model` name.

@@ -60,7 +60,6 @@ struct Gathered {
     slots: Vec<SlotReport>,
     busy_us: Vec<u64>,
     update_work: u64,
-    settings: Option<Settings>,
     mark: Option<(f64, Pose2)>,
     /// (slot, pose) at the start.
     starts: Vec<(usize, Pose2)>,
@@ -133,9 +132,8 @@ impl Resampler {
 
     async fn decide(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         let g = std::mem::take(&mut self.gathered);
-        let settings = g.settings.ok_or("pf.resampler: a correction without settings")?;
+        let settings = self.settings.ok_or("pf.resampler: a correction before the start")?;
         let mark = g.mark.ok_or("pf.resampler: a correction without its reading")?;
-        self.settings = Some(settings);
         let population = self.population.as_mut().ok_or("pf.resampler: a correction before the start")?;
         let mut slots = g.slots;
         slots.sort_by_key(|s| s.slot);
@@ -160,7 +158,7 @@ impl Resampler {
             settings.injection.map(|i| (i, &fits[..])),
         );
         let tasks = self.tasks.unwrap_or(1);
-        let task_of = if d.resampled {
+        if d.resampled {
             let placements: Vec<Placement> = d
                 .parents
                 .iter()
@@ -174,10 +172,9 @@ impl Resampler {
             // have moved, for comparison.
             let naive = moved(&placements, &round_robin(placements.len(), tasks));
             out.record("bytes_moved_round_robin", naive.bytes);
-            task_of
-        } else {
-            self.task_of.clone()
-        };
+            // Without resampling every particle stays where it is.
+            self.task_of = task_of;
+        }
         out.record("resample_us", started.elapsed().as_micros() as u64);
         out.record("neff_x100", (d.neff * 100.0) as u64);
         out.count("resamplings", u64::from(d.resampled));
@@ -187,17 +184,16 @@ impl Resampler {
         let decision = Decision {
             step: g.step,
             parents: d.parents.iter().map(|&p| p as u32).collect(),
-            task_of: task_of.iter().map(|&t| t as u32).collect(),
+            task_of: self.task_of.iter().map(|&t| t as u32).collect(),
             best: d.best as u32,
             fresh: d.fresh.iter().map(|&j| j as u32).collect(),
         };
         out.record("injected", d.fresh.len() as u64);
-        self.task_of = task_of;
         self.marks.push(mark);
         out.emit("decision", decision).await?;
         let (keep, radius, turn) = self.modes;
         if keep > 0 {
-            let poses: Vec<Pose2> = slots.iter().map(|s| s.pose).collect();
+            let poses: Vec<Pose2> = poses.iter().map(|p| p.0).collect();
             let found = modes(&poses, &d.weights, radius, turn, keep);
             out.emit("hypotheses", Hypotheses { stamp: mark.0, modes: found }).await?;
         }
@@ -254,12 +250,11 @@ impl Bolt for Resampler {
                 self.emit_estimate(*mark, out).await?;
                 out.emit("ready", Ready { step: *step, corrected: false }).await?;
             }
-            Report::Corrected { step, task, tasks, mark, slots, busy_us, settings } => {
+            Report::Corrected { step, task, tasks, mark, slots, busy_us } => {
                 let all = self.heard(*step, *task, *tasks)?;
                 let g = &mut self.gathered;
                 g.slots.extend_from_slice(slots);
                 g.busy_us.push(*busy_us);
-                g.settings = Some(*settings);
                 g.mark = Some(*mark);
                 if all {
                     self.decide(out).await?;
