@@ -540,13 +540,21 @@ fn speedup_runs_every_configuration_and_writes_a_table_csv_and_plot() {
     let csv = std::fs::read_to_string(dir.join("speedup.csv")).unwrap();
     let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 4, "{csv}");
-    for r in &rows {
-        assert!(r[2].parse::<f64>().unwrap() > 0.0, "median ms: {csv}");
-        if r[1] == "1" {
-            assert_eq!(r[3], "1.0000", "the baseline's speedup is 1: {csv}");
-        } else {
-            assert_eq!(r[8], "true", "K = 2 must reproduce K = 1: {csv}");
-        }
+    let number =
+        |r: &Vec<&str>, i: usize| r[i].parse::<f64>().unwrap_or_else(|_| panic!("column {i}: {csv}"));
+    for pair in rows.chunks(2) {
+        let (one, two) = (&pair[0], &pair[1]);
+        assert_eq!(
+            (one[0], one[1], two[0], two[1]),
+            (two[0], "1", one[0], "2"),
+            "rows by particles, then K: {csv}"
+        );
+        assert!(number(one, 2) > 0.0 && number(two, 2) > 0.0, "median ms: {csv}");
+        // Speedup T1/T2 and efficiency speedup/2, from the medians shown.
+        let speedup = number(one, 2) / number(two, 2);
+        assert!((number(two, 3) - speedup).abs() < 1e-3 * speedup.max(1.0), "speedup: {csv}");
+        assert!((number(two, 4) - speedup / 2.0).abs() < 1e-3 * speedup.max(1.0), "efficiency: {csv}");
+        assert_eq!(two[8], "true", "K = 2 must reproduce K = 1: {csv}");
     }
     let svg = std::fs::read_to_string(dir.join("speedup.svg")).unwrap();
     assert_eq!(svg.matches("<polyline").count(), 2, "one line per particle count");
