@@ -141,43 +141,68 @@ fn exp_neg(x: Real) -> Real {
 
 /// What a climb remembers of the map: for each (cell, step back) it has
 /// looked at, the candidate mean hit points there, in a direct-mapped
-/// table. The climb's steps are a cell or less, so its poses keep landing
-/// beams in the same few cells of each beam's neighbourhood, and those are
-/// read from the map once. The result is exactly that of
-/// [`TiledGrid::nearest_backed_wall`].
+/// table whose slot holds up to [`INLINE`] candidates itself, so that a
+/// beam costs one slot read and a branch-free minimum. The climb's steps
+/// are a cell or less, so its poses keep landing beams in the same few
+/// cells of each beam's neighbourhood, and those are read from the map
+/// once. The result is exactly that of [`TiledGrid::nearest_backed_wall`].
 #[derive(Debug)]
 struct BeamCache {
     slots: Vec<Slot>,
     /// Slots of other generations are empty: forgetting a map is a counter
     /// increment, not a pass over the table.
     generation: u32,
-    means: Vec<(f32, f32)>,
+    /// Candidates beyond a slot's first [`INLINE`] (a window with more
+    /// walls than that is rare).
+    overflow: Vec<(f32, f32)>,
+    /// Scratch for a window's candidates as the grid lists them.
+    found: Vec<(f32, f32)>,
     /// The per-beam exponents d²/σ of the pose being scored.
     exponents: Vec<Real>,
 }
 
-/// One remembered (cell, step back) and where its candidates are.
+/// Candidates a slot holds itself.
+const INLINE: usize = 4;
+
+/// One remembered (cell, step back) and its candidates: the first
+/// [`INLINE`] in `xs`/`ys` (unused ones at infinity, so that they never
+/// win), the rest in the overflow from `overflow_start`.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C, align(16))]
 struct Slot {
-    generation: u32,
     cell: (i32, i32),
-    back: (i8, i8),
-    start: u32,
-    end: u32,
+    /// The generation in the high bits, the step back in the low four.
+    tag: u32,
+    /// Candidates beyond the inline ones.
+    overflow_len: u16,
+    overflow_start: u32,
+    xs: [f32; INLINE],
+    ys: [f32; INLINE],
 }
 
-const EMPTY_SLOT: Slot = Slot { generation: 0, cell: (0, 0), back: (0, 0), start: 0, end: 0 };
+const EMPTY_SLOT: Slot = Slot {
+    cell: (0, 0),
+    tag: 0,
+    overflow_len: 0,
+    overflow_start: 0,
+    xs: [f32::INFINITY; INLINE],
+    ys: [f32::INFINITY; INLINE],
+};
 /// Table slots (a power of two).
-const CACHE_SLOTS: usize = 1 << 12;
-/// Candidates kept before the cache starts over (bounds its memory).
-const CACHE_CAPACITY: usize = 1 << 16;
+const CACHE_SLOTS: usize = 1 << 13;
+/// Overflow candidates kept before the cache starts over (bounds its
+/// memory).
+const CACHE_CAPACITY: usize = 1 << 14;
+/// Generations fit the tag's 28 high bits.
+const GENERATIONS: u32 = 1 << 28;
 
 impl Default for BeamCache {
     fn default() -> Self {
         BeamCache {
             slots: vec![EMPTY_SLOT; CACHE_SLOTS],
             generation: 1,
-            means: Vec::new(),
+            overflow: Vec::new(),
+            found: Vec::new(),
             exponents: Vec::new(),
         }
     }
@@ -186,9 +211,9 @@ impl Default for BeamCache {
 impl BeamCache {
     /// Empties the cache (before matching against another map).
     fn forget(&mut self) {
-        self.means.clear();
-        self.generation = self.generation.wrapping_add(1);
-        if self.generation == 0 {
+        self.overflow.clear();
+        self.generation += 1;
+        if self.generation == GENERATIONS {
             self.slots.fill(EMPTY_SLOT);
             self.generation = 1;
         }
@@ -198,43 +223,46 @@ impl BeamCache {
     fn nearest(&mut self, grid: &TiledGrid, hit: (Real, Real), back: (i64, i64), k: i64) -> Option<Real> {
         let c = grid.cell_of(hit.0, hit.1);
         let (hx, hy) = (hit.0 as f32, hit.1 as f32);
-        let mut best = f32::INFINITY;
-        let mut closest = |mx: f32, my: f32| {
-            let d2 = (hx - mx).powi(2) + (hy - my).powi(2);
-            if d2 < best {
-                best = d2;
-            }
-        };
-        match (i32::try_from(c.0), i32::try_from(c.1)) {
-            (Ok(x), Ok(y)) => {
-                let back8 = (back.0 as i8, back.1 as i8);
-                let hash = (x as u32).wrapping_mul(0x9e37_79b1)
-                    ^ (y as u32).wrapping_mul(0x85eb_ca77)
-                    ^ ((back.0 + 3 * back.1 + 4) as u32).wrapping_mul(0xc2b2_ae3d);
-                let index = (hash >> (32 - CACHE_SLOTS.trailing_zeros())) as usize;
-                let slot = self.slots[index];
-                let slot = if slot.generation == self.generation && slot.cell == (x, y) && slot.back == back8
-                {
-                    slot
-                } else {
-                    if self.means.len() > CACHE_CAPACITY {
-                        self.forget();
-                    }
-                    let start = self.means.len() as u32;
-                    let means = &mut self.means;
-                    grid.backed_walls(c, back, k, |mx, my| means.push((mx, my)));
-                    let generation = self.generation;
-                    let fresh =
-                        Slot { generation, cell: (x, y), back: back8, start, end: self.means.len() as u32 };
-                    self.slots[index] = fresh;
-                    fresh
-                };
-                for &(mx, my) in &self.means[slot.start as usize..slot.end as usize] {
-                    closest(mx, my);
-                }
-            }
+        let (Ok(x), Ok(y)) = (i32::try_from(c.0), i32::try_from(c.1)) else {
             // Cells beyond ±2³¹ (thousands of kilometres) are not cached.
-            _ => grid.backed_walls(c, back, k, closest),
+            let mut best = f32::INFINITY;
+            grid.backed_walls(c, back, k, |mx, my| best = best.min((hx - mx).powi(2) + (hy - my).powi(2)));
+            return (best < f32::INFINITY).then_some(Real::from(best));
+        };
+        let back_code = (back.0 + 3 * back.1 + 4) as u32;
+        let hash = (x as u32).wrapping_mul(0x9e37_79b1) ^ (y as u32).wrapping_mul(0x85eb_ca77) ^ back_code;
+        let index = (hash.wrapping_mul(0xc2b2_ae3d) >> (32 - CACHE_SLOTS.trailing_zeros())) as usize;
+        let mut tag = (self.generation << 4) | back_code;
+        if self.slots[index].tag != tag || self.slots[index].cell != (x, y) {
+            if self.overflow.len() > CACHE_CAPACITY {
+                self.forget();
+                tag = (self.generation << 4) | back_code;
+            }
+            self.found.clear();
+            let found = &mut self.found;
+            grid.backed_walls(c, back, k, |mx, my| found.push((mx, my)));
+            let slot = &mut self.slots[index];
+            *slot = Slot { cell: (x, y), tag, ..EMPTY_SLOT };
+            for (i, &(mx, my)) in self.found.iter().take(INLINE).enumerate() {
+                slot.xs[i] = mx;
+                slot.ys[i] = my;
+            }
+            if self.found.len() > INLINE {
+                slot.overflow_start = self.overflow.len() as u32;
+                slot.overflow_len = (self.found.len() - INLINE) as u16;
+                self.overflow.extend_from_slice(&self.found[INLINE..]);
+            }
+        }
+        let slot = &self.slots[index];
+        let mut best = f32::INFINITY;
+        for i in 0..INLINE {
+            best = best.min((hx - slot.xs[i]).powi(2) + (hy - slot.ys[i]).powi(2));
+        }
+        if slot.overflow_len > 0 {
+            let start = slot.overflow_start as usize;
+            for &(mx, my) in &self.overflow[start..start + slot.overflow_len as usize] {
+                best = best.min((hx - mx).powi(2) + (hy - my).powi(2));
+            }
         }
         (best < f32::INFINITY).then_some(Real::from(best))
     }
@@ -582,6 +610,41 @@ mod tests {
             integrate_scan(&mut g, p, &scan_of(world, p), 20.0);
         }
         g
+    }
+
+    #[test]
+    fn the_cache_answers_as_the_grid_does() {
+        use rand::{RngExt, SeedableRng};
+        let (grid, _, _, _) = scene();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut cache = BeamCache::default();
+        let (mut matched, mut overflowing) = (0, 0);
+        // Wider kernels' windows hold more walls than a slot does; kernel 4
+        // runs without forgetting, so that the overflow's bound is reached.
+        for k in [1, 2, 4] {
+            for round in 0..40_000 {
+                if round == 0 || (k < 4 && round % 5_000 == 0) {
+                    cache.forget();
+                }
+                let hit = (rng.random::<f64>() * 8.0, rng.random::<f64>() * 6.0);
+                let back = (rng.random_range(-1..=1), rng.random_range(-1..=1));
+                let want = grid.nearest_backed_wall(hit, back, k);
+                assert_eq!(cache.nearest(&grid, hit, back, k), want, "{hit:?} {back:?} k {k}");
+                // Asked again, from the cache.
+                assert_eq!(cache.nearest(&grid, hit, back, k), want, "{hit:?} {back:?} k {k}, cached");
+                matched += usize::from(want.is_some());
+                let mut found = 0;
+                grid.backed_walls(grid.cell_of(hit.0, hit.1), back, k, |_, _| found += 1);
+                overflowing += usize::from(found > INLINE);
+            }
+        }
+        assert!(
+            matched > 1_000 && overflowing > 100,
+            "the test reaches walls ({matched}) and overflows ({overflowing})"
+        );
+        // The overflow's bound starts the cache over rather than growing.
+        assert!(cache.generation > 1 + 17, "the cache started over {} times", cache.generation - 18);
+        assert!(cache.overflow.len() <= CACHE_CAPACITY + 81, "{}", cache.overflow.len());
     }
 
     #[test]
