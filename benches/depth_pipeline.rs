@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use squall::bolts::cgr::depth_sim::DepthCamera;
+use squall::bolts::cgr::depth_sim::{DepthCamera, Props};
 use squall::bolts::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
 use squall::bolts::cgr::model::{CgrModel, Init, LocalizeOptions};
 use squall::bolts::cgr::observation::Observation2d;
@@ -34,7 +34,7 @@ fn main() {
             SimEvent::Odom(_) => None,
         })
         .map(|(stamp, odometry, truth)| {
-            (stamp, odometry, truth, camera.render(&map, &[], &truth, &mut render_rng))
+            (stamp, odometry, truth, camera.render(&map, Props::default(), &truth, &mut render_rng))
         })
         .collect();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());

@@ -140,10 +140,12 @@ struct CgrParams {
     refine_iterations: u32,
     outlier_sigmas: Real,
     /// Augmented MCL (random particles when observations stop fitting):
-    /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`.
+    /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`
+    /// and `min_drop`.
     injection: bool,
     alpha_slow: Real,
     alpha_fast: Real,
+    min_drop: Real,
     srr: Real,
     srt: Real,
     str: Real,
@@ -151,7 +153,7 @@ struct CgrParams {
 }
 
 /// Augmented MCL's rates when `injection = true` and none are given.
-const DEFAULT_INJECTION: Injection = Injection { alpha_slow: 0.01, alpha_fast: 0.3 };
+const DEFAULT_INJECTION: Injection = Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1 };
 
 impl Default for CgrParams {
     fn default() -> Self {
@@ -177,6 +179,7 @@ impl Default for CgrParams {
             injection: o.injection.is_some(),
             alpha_slow: injection.alpha_slow,
             alpha_fast: injection.alpha_fast,
+            min_drop: injection.min_drop,
             srr: m.srr,
             srt: m.srt,
             str: m.str,
@@ -252,7 +255,11 @@ pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
         init,
         resampling: p.resampling,
         resample_threshold: p.resample_threshold,
-        injection: p.injection.then_some(Injection { alpha_slow: p.alpha_slow, alpha_fast: p.alpha_fast }),
+        injection: p.injection.then_some(Injection {
+            alpha_slow: p.alpha_slow,
+            alpha_fast: p.alpha_fast,
+            min_drop: p.min_drop,
+        }),
     };
     CgrModel::new(map, scenes, options)
 }

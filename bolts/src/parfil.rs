@@ -171,7 +171,7 @@ impl ParticleModel for ParfilModel {
         Pose2::IDENTITY
     }
 
-    fn scatter(&self, pose: &mut Pose2, rng: &mut ChaCha8Rng) {
+    fn scatter(&self, pose: &mut Pose2, _: &ParfilReading, rng: &mut ChaCha8Rng) {
         let o = &self.options;
         *pose = Pose2::new(
             rng.random::<Real>() * o.width,

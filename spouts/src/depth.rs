@@ -1,17 +1,18 @@
 //! The `depth_sim` spout: the simulator's robot carrying a depth camera.
 //! Along the simulated route (the laser simulator's, at its scan rate) it
 //! renders a depth frame of the line map, with boxes scattered on the
-//! floor as clutter. Streams `frame` (`DepthFrame`) and `truth`
+//! floor as clutter and people walking the roadmap. Streams `frame` (`DepthFrame`) and `truth`
 //! (`PoseStamped`).
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
-use squall_bolts::cgr::depth_sim::{Clutter, DepthCamera, DepthFrame};
+use squall_bolts::cgr::depth_sim::{Clutter, DepthCamera, DepthFrame, Props};
 use squall_bolts::linemap::LineMap;
 use squall_bolts::sensor::PoseStamped;
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
+use crate::sim::people::Crowd;
 use crate::sim::{SimConfig, SimEvent, Simulation, floor_for};
 
 #[derive(Debug, Deserialize)]
@@ -29,6 +30,9 @@ struct P {
     /// Boxes scattered on the floor. The default is 20.
     #[serde(default = "default_boxes")]
     boxes: usize,
+    /// People walking about. The default is 5.
+    #[serde(default = "default_people")]
+    people: usize,
     /// Seed; the default is the topology's.
     seed: Option<u64>,
 }
@@ -45,6 +49,9 @@ fn default_rate() -> f64 {
 fn default_boxes() -> usize {
     20
 }
+fn default_people() -> usize {
+    5
+}
 
 /// Emits depth frames along a simulated route.
 #[derive(Debug)]
@@ -52,7 +59,20 @@ pub struct DepthSimSpout {
     p: P,
     seed: u64,
     camera: DepthCamera,
-    sim: Option<(Simulation, LineMap, Vec<Clutter>, ChaCha8Rng)>,
+    sim: Option<World>,
+}
+
+/// The running simulation: the robot's, the map, the boxes, the people
+/// and the camera's noise.
+#[derive(Debug)]
+struct World {
+    sim: Simulation,
+    map: LineMap,
+    boxes: Vec<Clutter>,
+    crowd: Crowd,
+    /// The instant the crowd was last moved to.
+    crowd_time: f64,
+    noise: ChaCha8Rng,
 }
 
 impl DepthSimSpout {
@@ -95,19 +115,30 @@ impl Spout for DepthSimSpout {
         };
         config.check()?;
         ctx.expect_emits(2 * (self.p.duration_secs * self.p.frame_hz) as u64);
-        self.sim =
-            Some((Simulation::new(floor, config), map, boxes, ChaCha8Rng::seed_from_u64(self.seed ^ 0xde97)));
+        let crowd = Crowd::new(&floor, self.p.people, self.seed);
+        self.sim = Some(World {
+            sim: Simulation::new(floor, config),
+            map,
+            boxes,
+            crowd,
+            crowd_time: 0.0,
+            noise: ChaCha8Rng::seed_from_u64(self.seed ^ 0xde97),
+        });
         Ok(())
     }
 
     async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
-        let (sim, map, boxes, rng) = self.sim.as_mut().ok_or("the depth simulation was not opened")?;
+        let world = self.sim.as_mut().ok_or("the depth simulation was not opened")?;
         loop {
-            match sim.next() {
+            match world.sim.next() {
                 None => return Ok(SpoutStatus::Done),
                 Some(SimEvent::Odom(_)) => continue,
                 Some(SimEvent::Scan(scan, truth)) => {
-                    let image = self.camera.render(map, boxes, &truth, rng);
+                    world.crowd.advance(world.sim.floor(), scan.stamp - world.crowd_time);
+                    world.crowd_time = scan.stamp;
+                    let people = world.crowd.people(world.sim.floor());
+                    let props = Props { boxes: &world.boxes, people: &people };
+                    let image = self.camera.render(&world.map, props, &truth, &mut world.noise);
                     out.emit("frame", DepthFrame { stamp: scan.stamp, odometry: scan.odometry, image })
                         .await?;
                     out.emit("truth", PoseStamped { stamp: scan.stamp, pose: truth }).await?;

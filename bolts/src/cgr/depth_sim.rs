@@ -36,6 +36,27 @@ pub struct Clutter {
     pub height: Real,
 }
 
+/// A person: a vertical cylinder standing on the floor (metres). People
+/// move between frames; a frame sees them where they are at its instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Person {
+    /// Where they stand (x, y).
+    pub centre: (Real, Real),
+    /// Half their width.
+    pub radius: Real,
+    /// Height.
+    pub height: Real,
+}
+
+/// What stands in the map's rooms besides its walls.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Props<'a> {
+    /// Boxes.
+    pub boxes: &'a [Clutter],
+    /// People.
+    pub people: &'a [Person],
+}
+
 /// The sensor's noise (defaults after the Kinect/RealSense literature:
 /// σ(z) = a·z², 1 mm steps, nothing beyond 8 m or below 12° of grazing).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -91,13 +112,7 @@ impl DepthCamera {
     }
 
     /// A frame seen from robot pose `robot`; noise from `rng`.
-    pub fn render(
-        &self,
-        map: &LineMap,
-        clutter: &[Clutter],
-        robot: &Pose2,
-        rng: &mut ChaCha8Rng,
-    ) -> DepthImage {
+    pub fn render(&self, map: &LineMap, props: Props<'_>, robot: &Pose2, rng: &mut ChaCha8Rng) -> DepthImage {
         let k = self.intrinsics;
         let m = self.mount;
         let eye = robot.compose(&Pose2::new(m.x, m.y, m.yaw));
@@ -124,7 +139,7 @@ impl DepthCamera {
                 // World direction (per unit of camera depth z).
                 let (dx, dy) = (ch * forward - sh * left, sh * forward + ch * left);
                 let Some((t, cos_incidence)) =
-                    self.hit(map, &walls, clutter, (eye.x, eye.y), (dx, dy, up), m.height)
+                    self.hit(map, &walls, props, (eye.x, eye.y), (dx, dy, up), m.height)
                 else {
                     continue;
                 };
@@ -149,7 +164,7 @@ impl DepthCamera {
         &self,
         map: &LineMap,
         walls: &[u32],
-        clutter: &[Clutter],
+        props: Props<'_>,
         eye: (Real, Real),
         d: (Real, Real, Real),
         h: Real,
@@ -184,19 +199,35 @@ impl DepthCamera {
             face(w.a, w.b, self.wall_height);
         }
         // Boxes: their four sides and their top.
-        for b in clutter {
+        for b in props.boxes {
             let corners = [(b.min.0, b.min.1), (b.max.0, b.min.1), (b.max.0, b.max.1), (b.min.0, b.max.1)];
             for s in 0..4 {
                 face(corners[s], corners[(s + 1) % 4], b.height);
             }
         }
-        for b in clutter {
+        for b in props.boxes {
             if d.2 < 0.0 && h > b.height {
                 let t = (b.height - h) / d.2;
                 let (x, y) = (eye.0 + t * d.0, eye.1 + t * d.1);
                 if x >= b.min.0 && x <= b.max.0 && y >= b.min.1 && y <= b.max.1 {
                     take(t, d.2.abs() / norm);
                 }
+            }
+        }
+        // People: the near side of each cylinder, floor to head.
+        let horizontal2 = d.0 * d.0 + d.1 * d.1;
+        for p in props.people {
+            let (ox, oy) = (eye.0 - p.centre.0, eye.1 - p.centre.1);
+            let b = ox * d.0 + oy * d.1;
+            let disc = b * b - horizontal2 * (ox * ox + oy * oy - p.radius * p.radius);
+            if disc <= 0.0 || horizontal2 == 0.0 {
+                continue;
+            }
+            let t = (-b - disc.sqrt()) / horizontal2;
+            let z = h + t * d.2;
+            if (0.0..=p.height).contains(&z) {
+                let (nx, ny) = ((ox + t * d.0) / p.radius, (oy + t * d.1) / p.radius);
+                take(t, (nx * d.0 + ny * d.1).abs() / norm);
             }
         }
         best
@@ -222,8 +253,12 @@ mod tests {
             noise: DepthNoise { sigma_per_z2: 0.0, dropout: 0.0, ..DepthNoise::default() },
             ..DepthCamera::d435_on_robot()
         };
-        let image =
-            camera.render(&room(), &[], &Pose2::new(2.0, 3.0, 0.0), &mut ChaCha8Rng::seed_from_u64(1));
+        let image = camera.render(
+            &room(),
+            Props::default(),
+            &Pose2::new(2.0, 3.0, 0.0),
+            &mut ChaCha8Rng::seed_from_u64(1),
+        );
         // The centre pixel looks along +x at the wall x = 8: 6 m.
         assert_eq!(image.depth_mm[240 * 640 + 320], 6000);
         // Low rows see the floor: at row 400 the ray drops (400−240)/615
@@ -234,6 +269,31 @@ mod tests {
     }
 
     #[test]
+    fn a_person_stands_in_front_of_the_wall() {
+        let camera = DepthCamera {
+            noise: DepthNoise { sigma_per_z2: 0.0, dropout: 0.0, ..DepthNoise::default() },
+            ..DepthCamera::d435_on_robot()
+        };
+        let robot = Pose2::new(2.0, 3.0, 0.0);
+        let people = [Person { centre: (6.0, 3.0), radius: 0.25, height: 1.7 }];
+        let props = Props { boxes: &[], people: &people };
+        let image = camera.render(&room(), props, &robot, &mut ChaCha8Rng::seed_from_u64(1));
+        let depth = |row: usize, col: usize| f64::from(image.depth_mm[row * 640 + col]) / 1000.0;
+        // Straight ahead: the near side of the person, 4 m − 0.25 m away.
+        assert!((depth(240, 320) - 3.75).abs() < 0.002, "{}", depth(240, 320));
+        // Their head (1.7 m, 0.9 m above the camera) at 3.75 m is at row
+        // 240 − 0.9 × 615 / 3.75 ≈ 92: below it the person, above it the
+        // wall 6 m away.
+        assert!((depth(100, 320) - 3.75).abs() < 0.002, "{}", depth(100, 320));
+        assert_eq!(depth(80, 320), 6.0);
+        // The silhouette is as wide as the person: 35 px off the axis is
+        // 0.23 m off it at 4 m, still on them; 65 px is 0.42 m, the wall.
+        assert!((3.75..4.0).contains(&depth(240, 320 + 35)), "{}", depth(240, 320 + 35));
+        assert_eq!(depth(240, 320 + 65), 6.0);
+        assert_eq!(depth(240, 320 - 65), 6.0);
+    }
+
+    #[test]
     fn fspf_on_a_rendered_frame_finds_walls_that_match_the_map_at_the_true_pose() {
         // A small room: its walls within 3.5 m, where the noise (σ = 0.0015
         // z²) stays under FSPF's 2 cm tolerance.
@@ -241,7 +301,9 @@ mod tests {
         let camera = DepthCamera::d435_on_robot();
         let truth = Pose2::new(1.8, 1.6, 0.4);
         let clutter = [Clutter { min: (3.4, 2.2), max: (3.8, 2.6), height: 0.7 }];
-        let image = camera.render(&map, &clutter, &truth, &mut ChaCha8Rng::seed_from_u64(2));
+        let people = [Person { centre: (3.0, 3.0), radius: 0.25, height: 1.7 }];
+        let props = Props { boxes: &clutter, people: &people };
+        let image = camera.render(&map, props, &truth, &mut ChaCha8Rng::seed_from_u64(2));
         let mut filter = PlaneFilter::new(FspfOptions::default(), camera.intrinsics);
         let mut planes = PlaneFiltered::default();
         filter.filter(&image, &mut ChaCha8Rng::seed_from_u64(3), &mut planes);
@@ -251,12 +313,16 @@ mod tests {
         let o = CgrOptions::default();
         let at_truth = evaluate(&map, &lines, &truth, &obs, &o);
         let off = evaluate(&map, &lines, &Pose2::new(2.2, 2.4, 0.45), &obs, &o);
-        assert!(
-            at_truth.matched * 10 > obs.points.len() * 8,
-            "{} of {} matched",
-            at_truth.matched,
-            obs.points.len()
-        );
+        // The person's and the box's points match no wall; the walls' do.
+        let world = |p: &[f32; 2]| truth.compose(&Pose2::new(f64::from(p[0]), f64::from(p[1]), 0.0));
+        let on_person = |w: &Pose2| (w.x - 3.0).hypot(w.y - 3.0) < 0.4;
+        let on_box = |w: &Pose2| (3.3..3.9).contains(&w.x) && (2.1..2.7).contains(&w.y);
+        let people_points = obs.points.iter().map(world).filter(on_person).count();
+        let clutter_points = obs.points.iter().map(world).filter(|w| on_person(w) || on_box(w)).count();
+        assert!(people_points > 20, "{people_points} points on the person");
+        let wall_points = obs.points.len() - clutter_points;
+        assert!(at_truth.matched * 10 > wall_points * 8, "{} of {wall_points} matched", at_truth.matched);
+        assert!(at_truth.matched <= wall_points + clutter_points / 10, "{} matched", at_truth.matched);
         assert!(at_truth.log_likelihood > off.log_likelihood + 10.0, "{at_truth:?} vs {off:?}");
     }
 }

@@ -141,11 +141,14 @@ pub fn evaluate(
     e
 }
 
+/// The largest move of one refinement step: metres, radians.
+const MAX_STEP: (Real, Real) = (0.2, 0.1);
+
 /// Corrective Gradient Refinement of one pose: up to `refine_iterations`
 /// steps along the gradient, each scaled by the inverse diagonal
-/// curvature and halved until the likelihood rises (walls re-matched at
-/// every step). Returns the refined pose, its evaluation and the
-/// evaluations spent.
+/// curvature, kept within [`MAX_STEP`], and halved until the likelihood
+/// rises (walls re-matched at every step). Returns the refined pose, its
+/// evaluation and the evaluations spent.
 pub fn refine<'a>(
     map: &LineMap,
     lines_at: &mut impl FnMut(&Pose2) -> Cow<'a, [u32]>,
@@ -163,7 +166,12 @@ pub fn refine<'a>(
         }
         let step: Vec<Real> =
             (0..3).map(|k| if e.curvature[k] > 0.0 { e.gradient[k] / e.curvature[k] } else { 0.0 }).collect();
-        let mut scale = 1.0;
+        // A trust region: along a direction the points hardly constrain
+        // (down a corridor, seen by a narrow camera), the diagonal
+        // Gauss–Newton step divides by almost nothing, and a likelihood
+        // that is flat there would accept a jump of metres.
+        let translation = step[0].hypot(step[1]);
+        let mut scale = (MAX_STEP.0 / translation).min(MAX_STEP.1 / step[2].abs()).min(1.0);
         let mut improved = false;
         for _ in 0..4 {
             let candidate =

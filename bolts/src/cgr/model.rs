@@ -28,7 +28,9 @@ use crate::slam::motion::{MotionNoise, sample_motion};
 pub enum Init {
     /// Tracking: every particle at this pose.
     Known(Pose2),
-    /// Global localization: uniform over the map's bounding box.
+    /// Global localization: poses the first reading supports (one of its
+    /// points on a wall; see `CgrModel::propose`), uniform over the map's
+    /// bounding box where no such pose is found.
     Global,
 }
 
@@ -73,7 +75,13 @@ pub struct CgrModel {
     map: Arc<LineMap>,
     scenes: Option<Arc<SceneGrid>>,
     options: LocalizeOptions,
+    /// Running total of wall lengths, wall by wall (for drawing a wall
+    /// in proportion to its length).
+    wall_lengths: Vec<Real>,
 }
+
+/// Draws an injected pose tries before it falls back to a uniform one.
+const PROPOSAL_TRIES: usize = 20;
 
 impl CgrModel {
     /// The model; errors name the wrong setting.
@@ -93,8 +101,69 @@ impl CgrModel {
                     i.alpha_slow, i.alpha_fast
                 ));
             }
+            if !(i.min_drop >= 0.0 && i.min_drop.is_finite()) {
+                return Err(format!("min_drop must be a finite number ≥ 0, got {}", i.min_drop));
+            }
         }
-        Ok(CgrModel { map, scenes, options })
+        let wall_lengths = map
+            .walls
+            .iter()
+            .scan(0.0, |total, w| {
+                *total += (w.b.0 - w.a.0).hypot(w.b.1 - w.a.1);
+                Some(*total)
+            })
+            .collect();
+        Ok(CgrModel { map, scenes, options, wall_lengths })
+    }
+
+    /// A pose drawn uniformly over the map's bounding box.
+    fn uniform(&self, rng: &mut ChaCha8Rng) -> Pose2 {
+        let (x0, y0, x1, y1) = self.map.bounds();
+        Pose2::new(
+            x0 + rng.random::<Real>() * (x1 - x0),
+            y0 + rng.random::<Real>() * (y1 - y0),
+            (rng.random::<Real>() * 2.0 - 1.0) * std::f64::consts::PI,
+        )
+    }
+
+    /// A pose at which one observed point, drawn at random, lies on a wall
+    /// drawn in proportion to length (at a random place along it, facing
+    /// it as its normal says), and the sensor sees that place: poses the
+    /// reading supports, where a uniform draw would almost never land
+    /// within CGR's reach of the robot. `None` when the draw fails (no
+    /// points, or the place is hidden from the sensor).
+    fn propose(&self, obs: &Observation2d, rng: &mut ChaCha8Rng) -> Option<Pose2> {
+        let total = *self.wall_lengths.last()?;
+        if obs.points.is_empty() || total <= 0.0 {
+            return None;
+        }
+        let i = rng.random_range(0..obs.points.len());
+        let (p, n) = (obs.points[i], obs.normals[i]);
+        let (p, n) = ((Real::from(p[0]), Real::from(p[1])), (Real::from(n[0]), Real::from(n[1])));
+        let at = rng.random::<Real>() * total;
+        let w =
+            &self.map.walls[self.wall_lengths.partition_point(|&l| l <= at).min(self.map.walls.len() - 1)];
+        let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
+        let length = ex.hypot(ey);
+        if length == 0.0 {
+            return None;
+        }
+        let u = rng.random::<Real>();
+        let q = (w.a.0 + u * ex, w.a.1 + u * ey);
+        // The wall's normal on a side drawn at random; the observed normal
+        // faces the sensor, so turned onto it the sensor is on that side.
+        let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+        let normal = (-ey * side / length, ex * side / length);
+        let theta = crate::geometry::normalize_angle(normal.1.atan2(normal.0) - n.1.atan2(n.0));
+        let (s, c) = theta.sin_cos();
+        let robot = (q.0 - (c * p.0 - s * p.1), q.1 - (s * p.0 + c * p.1));
+        let sensor =
+            (robot.0 + c * obs.sensor.0 - s * obs.sensor.1, robot.1 + s * obs.sensor.0 + c * obs.sensor.1);
+        // Stop just short of the wall: the ray must reach it unblocked.
+        let (dx, dy) = (q.0 - sensor.0, q.1 - sensor.1);
+        let d = dx.hypot(dy);
+        let short = if d > 0.01 { (q.0 - 0.01 * dx / d, q.1 - 0.01 * dy / d) } else { sensor };
+        self.map.clear(sensor, short).then_some(Pose2::new(robot.0, robot.1, theta))
     }
 
     /// The walls visible from `pose`: the grid's cell if the pose is on the
@@ -131,9 +200,9 @@ impl ParticleModel for CgrModel {
         }
     }
 
-    fn scatter(&self, pose: &mut Pose2, rng: &mut ChaCha8Rng) {
+    fn scatter(&self, pose: &mut Pose2, first: &Observation2d, rng: &mut ChaCha8Rng) {
         if self.options.init == Init::Global {
-            self.inject(pose, rng);
+            self.inject(pose, first, rng);
         }
     }
 
@@ -141,13 +210,9 @@ impl ParticleModel for CgrModel {
         self.options.injection
     }
 
-    fn inject(&self, pose: &mut Pose2, rng: &mut ChaCha8Rng) {
-        let (x0, y0, x1, y1) = self.map.bounds();
-        *pose = Pose2::new(
-            x0 + rng.random::<Real>() * (x1 - x0),
-            y0 + rng.random::<Real>() * (y1 - y0),
-            (rng.random::<Real>() * 2.0 - 1.0) * std::f64::consts::PI,
-        );
+    fn inject(&self, pose: &mut Pose2, reading: &Observation2d, rng: &mut ChaCha8Rng) {
+        *pose =
+            (0..PROPOSAL_TRIES).find_map(|_| self.propose(reading, rng)).unwrap_or_else(|| self.uniform(rng));
     }
 
     fn mark(&self, input: &Observation2d) -> (f64, Pose2) {

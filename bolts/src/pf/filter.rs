@@ -95,7 +95,9 @@ where
         self.task_of = loads(n, self.tasks).iter().enumerate().flat_map(|(t, &l)| vec![t; l]).collect();
         let model = &self.model;
         self.shards = (0..self.tasks)
-            .map(|t| Shard::start(model, t, self.seed, (0..n).filter(|&s| self.task_of[s] == t), &state))
+            .map(|t| {
+                Shard::start(model, t, self.seed, (0..n).filter(|&s| self.task_of[s] == t), &state, first)
+            })
             .collect();
         let (stamp, odometry) = model.mark(first);
         let mut poses: Vec<(usize, Pose2)> = self.shards.iter().flat_map(|s| s.poses(model)).collect();
@@ -146,7 +148,7 @@ where
         }
         for (shard, inbox) in self.shards.iter_mut().zip(inboxes) {
             shard
-                .adopt(model, self.step, parents, task_of, &decision.fresh, inbox)
+                .adopt(model, self.step, input, parents, task_of, &decision.fresh, inbox)
                 .expect("every parent is held by some shard");
         }
         if let Some(task_of) = placed {

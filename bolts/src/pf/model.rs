@@ -36,9 +36,10 @@ pub trait ParticleModel: Send + Sync + 'static {
     fn start(&self, first: &Self::Input) -> Self::State;
 
     /// Spreads one particle's copy of the start state, drawing from `rng`
-    /// (for global localization: a uniform pose). The default keeps it.
-    fn scatter(&self, state: &mut Self::State, rng: &mut ChaCha8Rng) {
-        let _ = (state, rng);
+    /// (for global localization: a pose the first reading supports). The
+    /// default keeps it.
+    fn scatter(&self, state: &mut Self::State, first: &Self::Input, rng: &mut ChaCha8Rng) {
+        let _ = (state, first, rng);
     }
 
     /// The reading's stamp and odometry pose (the lineage's marks, from
@@ -102,10 +103,11 @@ pub trait ParticleModel: Send + Sync + 'static {
         None
     }
 
-    /// Redraws a particle from scratch (an injected one). The default
-    /// keeps it.
-    fn inject(&self, state: &mut Self::State, rng: &mut ChaCha8Rng) {
-        let _ = (state, rng);
+    /// Redraws a particle from scratch (an injected one), given the
+    /// reading just corrected: a model may draw states that reading
+    /// supports. The default keeps it.
+    fn inject(&self, state: &mut Self::State, reading: &Self::Input, rng: &mut ChaCha8Rng) {
+        let _ = (state, reading, rng);
     }
 
     /// How the trajectory fills in readings between corrections.
@@ -114,15 +116,22 @@ pub trait ParticleModel: Send + Sync + 'static {
     }
 }
 
-/// Augmented MCL's smoothing of the mean observation likelihood: a slow
-/// and a fast average; while the fast one is below the slow one, a share
-/// 1 − fast/slow of the particles is redrawn at random.
+/// Augmented MCL's smoothing of the best particle's observation
+/// likelihood: a slow and a fast average; while the fast one is below the slow one by more
+/// than a dead band, a share 1 − fast/slow · e^`min_drop` of the particles
+/// is redrawn (see [`ParticleModel::inject`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Injection {
     /// Rate of the slow average (0 < slow < fast ≤ 1).
     pub alpha_slow: Real,
     /// Rate of the fast average.
     pub alpha_fast: Real,
+    /// The dead band: how far (in the model's fit, a log-likelihood) the
+    /// fast average must fall below the slow one before anything is
+    /// injected. Without it every ordinary dip of the fit injects a few
+    /// particles, and one that happens to fit a look-alike place better
+    /// for a moment takes the estimate there.
+    pub min_drop: Real,
 }
 
 /// One particle's correction.

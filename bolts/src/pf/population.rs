@@ -131,27 +131,28 @@ impl Population {
         Decision { neff, parents, resampled, best: self.best(), weights, fresh }
     }
 
-    /// Updates augmented MCL's averages with this reading's mean fit
+    /// Updates augmented MCL's averages with this reading's best fit
     /// (`fits`: each slot's log fit) and picks the new slots to redraw:
-    /// each with probability max(0, 1 − fast/slow), drawn per slot.
+    /// each with probability max(0, 1 − fast/slow · e^min_drop), drawn per
+    /// slot. The best fit, not the mean: a set spread out by a turn fits
+    /// worse on average while its best particles still fit, and that is
+    /// no reason to think the robot lost.
     fn fresh_slots(&mut self, step: u64, fits: &[Real], i: Injection) -> Vec<usize> {
-        let n = fits.len() as Real;
-        let max = fits.iter().copied().fold(Real::NEG_INFINITY, Real::max);
-        if !max.is_finite() {
+        let best = fits.iter().copied().fold(Real::NEG_INFINITY, Real::max);
+        if !best.is_finite() {
             return Vec::new();
         }
-        let log_mean = max + (fits.iter().map(|f| (f - max).exp()).sum::<Real>() / n).ln();
         let blend = |old: Real, alpha: Real| {
-            let (a, b) = ((1.0 - alpha).ln() + old, alpha.ln() + log_mean);
+            let (a, b) = ((1.0 - alpha).ln() + old, alpha.ln() + best);
             let m = a.max(b);
             m + ((a - m).exp() + (b - m).exp()).ln()
         };
         let (slow, fast) = match self.averages {
-            None => (log_mean, log_mean),
+            None => (best, best),
             Some((slow, fast)) => (blend(slow, i.alpha_slow), blend(fast, i.alpha_fast)),
         };
         self.averages = Some((slow, fast));
-        let p = (1.0 - (fast - slow).exp()).max(0.0);
+        let p = (1.0 - (fast - slow + i.min_drop).exp()).max(0.0);
         if p <= 0.0 {
             return Vec::new();
         }
@@ -231,9 +232,30 @@ mod tests {
     }
 
     #[test]
+    fn a_spread_set_whose_best_still_fits_injects_nothing() {
+        let mut p = Population::start(&[at(0.0); 100], 7, 0.0, at(0.0));
+        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5, min_drop: 0.1 });
+        let reports = vec![(at(1.0), -1.0); 100];
+        for step in 1..=40 {
+            // After step 10 all but a few particles fit badly.
+            let fits: Vec<Real> = (0..100).map(|j| if step <= 10 || j < 5 { -0.05 } else { -0.9 }).collect();
+            let d = p.correct(
+                step,
+                (step as f64, at(0.0)),
+                &reports,
+                1.0 / 100.0,
+                0.5,
+                Scheme::LowVariance,
+                injection.map(|i| (i, &fits[..])),
+            );
+            assert!(d.fresh.is_empty(), "step {step}: {} injected", d.fresh.len());
+        }
+    }
+
+    #[test]
     fn injection_starts_when_the_fit_drops_and_not_before() {
         let mut p = Population::start(&[at(0.0); 200], 7, 0.0, at(0.0));
-        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5 });
+        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5, min_drop: 0.1 });
         let reports = vec![(at(1.0), -1.0); 200];
         let correct = |p: &mut Population, step: u64, fit: Real| {
             let fits = vec![fit; 200];
@@ -251,21 +273,29 @@ mod tests {
         for step in 1..=20 {
             assert!(correct(&mut p, step, -0.05).is_empty(), "a steady fit injects nothing");
         }
-        // The fit per point drops by 0.7: fast/slow falls towards e^−0.7.
+        // A dip within the dead band injects nothing either.
+        for step in 21..=23 {
+            assert!(correct(&mut p, step, -0.12).is_empty(), "a small dip injects nothing");
+        }
+        for step in 24..=30 {
+            assert!(correct(&mut p, step, -0.05).is_empty(), "a steady fit injects nothing");
+        }
+        // The fit per point drops by 0.7: fast/slow falls towards e^−0.7,
+        // and the share redrawn towards 1 − e^(−0.7 + 0.1).
         let mut fresh = Vec::new();
-        for step in 21..=30 {
+        for step in 31..=40 {
             fresh = correct(&mut p, step, -0.75);
         }
         let share = fresh.len() as Real / 200.0;
-        assert!(share > 0.2 && share < 0.7, "share injected {share}");
+        assert!(share > 0.2 && share < 0.6, "share injected {share}");
         assert!(fresh.windows(2).all(|w| w[0] < w[1]), "fresh slots in order");
         // Deterministic: the same history picks the same slots.
         let mut q = Population::start(&[at(0.0); 200], 7, 0.0, at(0.0));
-        for step in 1..=20 {
-            correct(&mut q, step, -0.05);
+        for (step, fit) in (1..=40).zip([-0.05; 20].into_iter().chain([-0.12; 3]).chain([-0.05; 7])) {
+            correct(&mut q, step, fit);
         }
         let mut again = Vec::new();
-        for step in 21..=30 {
+        for step in 31..=40 {
             again = correct(&mut q, step, -0.75);
         }
         assert_eq!(fresh, again);

@@ -49,19 +49,21 @@ impl<M: ParticleModel> std::fmt::Debug for Shard<M> {
 
 impl<M: ParticleModel> Shard<M> {
     /// Task `task`'s shard holding `slots`, each a copy of `start` spread
-    /// by the model's `scatter` with the slot's draws for reading 0.
+    /// by the model's `scatter` given the `first` reading, with the slot's
+    /// draws for reading 0.
     pub fn start(
         model: &M,
         task: usize,
         seed: u64,
         slots: impl IntoIterator<Item = usize>,
         start: &M::State,
+        first: &M::Input,
     ) -> Self {
         let held = slots
             .into_iter()
             .map(|slot| {
                 let mut state = start.clone();
-                model.scatter(&mut state, &mut rng_for(seed, 0, slot as u64));
+                model.scatter(&mut state, first, &mut rng_for(seed, 0, slot as u64));
                 (slot, state)
             })
             .collect();
@@ -131,11 +133,14 @@ impl<M: ParticleModel> Shard<M> {
     /// Takes up the new set after the decision for reading `step`: the new
     /// slots placed on this task, copied from local parents or taken from
     /// `incoming` (new slot, state), and the `fresh` ones (sorted) redrawn
-    /// by the model. Fails, naming the slot, if a state is missing.
+    /// by the model given `reading`, the reading just corrected. Fails,
+    /// naming the slot, if a state is missing.
+    #[allow(clippy::too_many_arguments)]
     pub fn adopt(
         &mut self,
         model: &M,
         step: u64,
+        reading: &M::Input,
         parents: &[usize],
         task_of: &[usize],
         fresh: &[usize],
@@ -178,7 +183,7 @@ impl<M: ParticleModel> Shard<M> {
         }
         for (slot, state) in &mut held {
             if fresh.binary_search(slot).is_ok() {
-                model.inject(state, &mut rng_for(self.seed, step, INJECTION_STREAM + *slot as u64));
+                model.inject(state, reading, &mut rng_for(self.seed, step, INJECTION_STREAM + *slot as u64));
             }
         }
         self.held = held;
@@ -244,8 +249,8 @@ mod tests {
         fn weight_smoothing(&self) -> Real {
             1.0
         }
-        fn inject(&self, s: &mut Vec<f64>, _: &mut rand_chacha::ChaCha8Rng) {
-            *s = vec![-1.0];
+        fn inject(&self, s: &mut Vec<f64>, reading: &f64, _: &mut rand_chacha::ChaCha8Rng) {
+            *s = vec![-*reading];
         }
         fn resample_threshold(&self) -> Real {
             0.5
@@ -255,7 +260,7 @@ mod tests {
     #[test]
     fn a_transfer_delivers_exactly_the_parents_state() {
         let mut shards: Vec<Shard<Walk>> = (0..2)
-            .map(|t| Shard::start(&Walk, t, 9, (0..6).filter(move |s| s % 2 == t), &vec![0.0]))
+            .map(|t| Shard::start(&Walk, t, 9, (0..6).filter(move |s| s % 2 == t), &vec![0.0], &0.0))
             .collect();
         for (step, shard) in shards.iter_mut().enumerate() {
             shard.predict(&Walk, step as u64 + 1, &1.0);
@@ -272,8 +277,8 @@ mod tests {
         assert_eq!(shards[1].expected_incoming(&parents, &task_of), 2);
         let to = |t: usize| sent.iter().flatten().filter(move |s| s.0 == t).map(|s| (s.1, s.2.clone()));
         let (in0, in1): (Vec<_>, Vec<_>) = (to(0).collect(), to(1).collect());
-        shards[0].adopt(&Walk, 1, &parents, &task_of, &[], in0).unwrap();
-        shards[1].adopt(&Walk, 1, &parents, &task_of, &[], in1).unwrap();
+        shards[0].adopt(&Walk, 1, &1.0, &parents, &task_of, &[], in0).unwrap();
+        shards[1].adopt(&Walk, 1, &1.0, &parents, &task_of, &[], in1).unwrap();
         for (j, &p) in parents.iter().enumerate() {
             assert_eq!(shards[task_of[j]].state(j), Some(&before[p]), "new slot {j}");
         }
@@ -282,8 +287,8 @@ mod tests {
 
     #[test]
     fn fresh_slots_are_redrawn_and_the_others_copied() {
-        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1, 2], &vec![0.5]);
-        shard.adopt(&Walk, 1, &[2, 2, 0], &[0, 0, 0], &[1], Vec::new()).unwrap();
+        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1, 2], &vec![0.5], &0.0);
+        shard.adopt(&Walk, 1, &1.0, &[2, 2, 0], &[0, 0, 0], &[1], Vec::new()).unwrap();
         assert_eq!(
             shard.held().iter().map(|h| h.1.clone()).collect::<Vec<_>>(),
             vec![vec![0.5], vec![-1.0], vec![0.5]]
@@ -292,8 +297,8 @@ mod tests {
 
     #[test]
     fn a_missing_transfer_is_an_error_naming_the_slot() {
-        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0]);
-        let e = shard.adopt(&Walk, 1, &[0, 3], &[0, 0], &[], Vec::new()).unwrap_err();
+        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0], &0.0);
+        let e = shard.adopt(&Walk, 1, &1.0, &[0, 3], &[0, 0], &[], Vec::new()).unwrap_err();
         assert!(e.contains("new slot 1") && e.contains("parent 3"), "{e}");
     }
 }

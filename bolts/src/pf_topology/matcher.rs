@@ -133,8 +133,8 @@ impl<M: HostedModel> Matcher<M> {
             let first: usize = load[..self.task].iter().sum();
             // Equal lineage weights: the best is the last slot.
             self.best = n - 1;
-            let shard =
-                Shard::start(&self.model, self.task, self.seed, first..first + load[self.task], &state);
+            let slots = first..first + load[self.task];
+            let shard = Shard::start(&self.model, self.task, self.seed, slots, &state, &reading.input);
             let poses = shard.poses(&self.model).into_iter().map(|(slot, p)| (slot as u32, p)).collect();
             self.shard = Some(shard);
             let (particles, settings) = (n as u32, self.settings());
@@ -201,7 +201,16 @@ impl<M: HostedModel> Matcher<M> {
         let shard = self.shard.as_mut().ok_or("pf.matcher: no particles yet")?;
         out.record("particles_received", self.received.len() as u64);
         let step = reading.step;
-        shard.adopt(&self.model, step, &plan.parents, &plan.task_of, &plan.fresh, self.received.drain(..))?;
+        let received = self.received.drain(..);
+        shard.adopt(
+            &self.model,
+            step,
+            &reading.input,
+            &plan.parents,
+            &plan.task_of,
+            &plan.fresh,
+            received,
+        )?;
         let update_work = shard.update(&self.model, &reading.input);
         let busy_us = plan.started.elapsed().as_micros() as u64;
         out.record("update_us", busy_us);

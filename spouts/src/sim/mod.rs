@@ -3,6 +3,7 @@
 
 pub mod office;
 pub mod output;
+pub mod people;
 mod rng;
 pub mod roadmap;
 pub mod robot;
