@@ -16,7 +16,8 @@ pub(super) struct LocalizeArgs {
     /// The line map (`x1,y1,x2,y2` per line).
     #[arg(long, value_name = "FILE")]
     map: PathBuf,
-    /// Simulate a robot in the map (the only input for now).
+    /// Simulate a robot in the map (required: recorded input is not read
+    /// yet).
     #[arg(long)]
     sim: bool,
     /// Simulated seconds.
@@ -35,7 +36,8 @@ pub(super) struct LocalizeArgs {
     /// How the new set is drawn.
     #[arg(long, value_name = "low-variance|sparse-ring|global", default_value = "low-variance")]
     resampling: String,
-    /// `known` (start at the true pose) or `global` (uniform over the map).
+    /// `known` (start at the true pose) or `global` (poses the first
+    /// reading supports, anywhere on the map).
     #[arg(long, value_name = "known|global", default_value = "known")]
     init: String,
     /// Run seed (simulated world, route and noise, and the filter).

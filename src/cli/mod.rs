@@ -86,8 +86,9 @@ enum Command {
     /// RBPF SLAM on a log, a bag or the simulated office; writes map.pgm,
     /// map.yaml, map.png, trajectory.tum and metrics.json.
     Slam(slam::SlamArgs),
-    /// Localize on a line map with CGR (simulated laser for now); writes
-    /// trajectory.tum, ground_truth.tum and metrics.json.
+    /// Localize on a line map with CGR (a simulated laser or depth
+    /// camera); writes trajectory.tum, hypotheses.jsonl, ground_truth.tum
+    /// and metrics.json.
     Localize(localize::LocalizeArgs),
     /// Run SLAM for every (particles, matcher tasks) pair; print the
     /// speedup table, write speedup.csv and speedup.svg.

@@ -143,10 +143,13 @@ pub fn evaluate(
 
 /// The largest move of one refinement step: metres, radians.
 const MAX_STEP: (Real, Real) = (0.2, 0.1);
+/// The damping of each translation axis, as a share of the two axes'
+/// summed curvature.
+const TRANSLATION_DAMPING: Real = 0.1;
 
 /// Corrective Gradient Refinement of one pose: up to `refine_iterations`
 /// steps along the gradient, each scaled by the inverse diagonal
-/// curvature, kept within [`MAX_STEP`], and halved until the likelihood
+/// curvature (translation damped), kept within [`MAX_STEP`], and halved until the likelihood
 /// rises (walls re-matched at every step). Returns the refined pose, its
 /// evaluation and the evaluations spent.
 pub fn refine<'a>(
@@ -164,12 +167,20 @@ pub fn refine<'a>(
         if e.matched == 0 {
             break;
         }
-        let step: Vec<Real> =
-            (0..3).map(|k| if e.curvature[k] > 0.0 { e.gradient[k] / e.curvature[k] } else { 0.0 }).collect();
-        // A trust region: along a direction the points hardly constrain
-        // (down a corridor, seen by a narrow camera), the diagonal
-        // Gauss–Newton step divides by almost nothing, and a likelihood
-        // that is flat there would accept a jump of metres.
+        // Along a direction the points hardly constrain (down a corridor,
+        // seen by a narrow camera) the diagonal Gauss–Newton step divides
+        // by almost nothing, and a likelihood that is flat there accepts
+        // it: the particles would wander along the corridor. The
+        // translation axes are damped by a share of their summed
+        // curvature (Levenberg–Marquardt), and every step stays within a
+        // trust region.
+        let damping = TRANSLATION_DAMPING * (e.curvature[0] + e.curvature[1]);
+        let step: Vec<Real> = (0..3)
+            .map(|k| {
+                let c = e.curvature[k] + if k < 2 { damping } else { 0.0 };
+                if c > 0.0 { e.gradient[k] / c } else { 0.0 }
+            })
+            .collect();
         let translation = step[0].hypot(step[1]);
         let mut scale = (MAX_STEP.0 / translation).min(MAX_STEP.1 / step[2].abs()).min(1.0);
         let mut improved = false;

@@ -1,5 +1,5 @@
 //! Observable scenes precomputed on a grid (thesis §4.2.2, Fig. 6.4): for
-//! every cell centre, the walls visible from there; localization then looks
+//! every cell, the walls visible from its centre and its neighbours'; localization then looks
 //! the scene up instead of ray casting per particle. Built in parallel and
 //! cached to a file named by a hash of the map and the grid settings.
 
@@ -12,7 +12,7 @@ use crate::geometry::Real;
 use crate::linemap::LineMap;
 
 /// Bumped whenever the file layout or the scene algorithm changes.
-const FORMAT: u64 = 1;
+const FORMAT: u64 = 2;
 
 /// Why a cached grid could not be used or written.
 #[derive(Debug, thiserror::Error)]
@@ -44,7 +44,7 @@ pub struct SceneGrid {
 impl SceneGrid {
     /// Computes the scene at every cell centre of a `cell`-metre grid over
     /// the map's bounding box, walls up to `range` metres, on `threads`
-    /// threads.
+    /// threads; each cell keeps the union of its 3 × 3 block's scenes.
     pub fn build(map: &LineMap, cell: Real, range: Real, threads: usize) -> Self {
         assert!(cell > 0.0 && range > 0.0, "cell size and range must be positive");
         let (x0, y0, x1, y1) = map.bounds();
@@ -75,12 +75,29 @@ impl SceneGrid {
                 .collect();
             handles.into_iter().map(|h| h.join().expect("a scene thread panicked")).collect()
         });
+        let centres: Vec<Vec<u32>> = chunks.into_iter().flatten().collect();
+        // A cell's scene is what its own and its eight neighbours' centres
+        // see: a robot in a doorway, whose cell centre lies in the wall
+        // beside it, still finds the walls of the rooms on both sides.
+        // Walls a neighbour sees behind an occluder cost a little time,
+        // not accuracy: a point matches the first wall its ray meets.
         let mut offsets = Vec::with_capacity(width * height + 1);
         let mut lines = Vec::new();
+        let mut ids = Vec::new();
         offsets.push(0);
-        for ids in chunks.into_iter().flatten() {
-            lines.extend(ids);
-            offsets.push(lines.len() as u32);
+        for j in 0..height {
+            for i in 0..width {
+                ids.clear();
+                for nj in j.saturating_sub(1)..(j + 2).min(height) {
+                    for ni in i.saturating_sub(1)..(i + 2).min(width) {
+                        ids.extend_from_slice(&centres[nj * width + ni]);
+                    }
+                }
+                ids.sort_unstable();
+                ids.dedup();
+                lines.extend_from_slice(&ids);
+                offsets.push(lines.len() as u32);
+            }
         }
         SceneGrid {
             key: Self::key(map, cell, range),
@@ -186,10 +203,14 @@ mod tests {
         let grid = SceneGrid::build(&map, 0.5, 20.0, 2);
         assert_eq!(grid.size(), (20, 20));
         for (x, y) in [(5.0, 2.0), (1.2, 8.7), (5.1, 8.0), (9.9, 0.1)] {
-            let i = (x / 0.5_f64).floor();
-            let j = (y / 0.5_f64).floor();
-            let centre = ((i + 0.5) * 0.5, (j + 0.5) * 0.5);
-            let mut want: Vec<u32> = observable_scene(&map, centre, 20.0).iter().map(|v| v.line).collect();
+            let (i, j) = ((x / 0.5_f64).floor() as i64, (y / 0.5_f64).floor() as i64);
+            let mut want: Vec<u32> = Vec::new();
+            for (ni, nj) in (i - 1..=i + 1).flat_map(|ni| (j - 1..=j + 1).map(move |nj| (ni, nj))) {
+                if (0..20).contains(&ni) && (0..20).contains(&nj) {
+                    let centre = ((ni as Real + 0.5) * 0.5, (nj as Real + 0.5) * 0.5);
+                    want.extend(observable_scene(&map, centre, 20.0).iter().map(|v| v.line));
+                }
+            }
             want.sort_unstable();
             want.dedup();
             assert_eq!(grid.lines_at(x, y).unwrap(), &want[..], "at ({x}, {y})");
@@ -199,6 +220,26 @@ mod tests {
         assert_eq!(grid.lines_at(5.0, 8.0).unwrap(), &[0, 1, 2, 3, 4]);
         assert_eq!(grid.lines_at(-1.0, 5.0), None);
         assert_eq!(SceneGrid::build(&map, 0.5, 20.0, 1), grid, "threads do not change the grid");
+    }
+
+    #[test]
+    fn a_robot_in_a_doorway_beside_its_cell_centre_sees_its_own_room() {
+        // Two rooms, the wall between them at x = 5.2 with a door from
+        // y = 4 to 6.
+        let map = LineMap::parse(
+            "rooms",
+            "0,0,10,0\n10,0,10,10\n10,10,0,10\n0,10,0,0\n5.2,0,5.2,4\n5.2,6,5.2,10\n",
+        )
+        .unwrap();
+        let grid = SceneGrid::build(&map, 0.5, 20.0, 2);
+        // At (5.1, 3.9), left of the wall beside the jamb, the cell's
+        // centre (5.25, 3.75) is right of the wall, in the other room; the
+        // left room's far wall (x = 0) must still be in the scene.
+        let centre_only: Vec<u32> =
+            observable_scene(&map, (5.25, 3.75), 20.0).iter().map(|v| v.line).collect();
+        assert!(!centre_only.contains(&3), "the case arises: {centre_only:?}");
+        let seen = grid.lines_at(5.1, 3.9).unwrap();
+        assert!(seen.contains(&3) && seen.contains(&1), "both rooms' far walls: {seen:?}");
     }
 
     #[test]
