@@ -1,5 +1,6 @@
 //! Observable scenes precomputed on a grid (thesis §4.2.2, Fig. 6.4): for
-//! every cell, the walls visible from its centre and its neighbours'; localization then looks
+//! every cell, the walls visible from its centre (and, next to a wall,
+//! from its neighbours' centres); localization then looks
 //! the scene up instead of ray casting per particle. Built in parallel and
 //! cached to a file named by a hash of the map and the grid settings.
 
@@ -7,12 +8,12 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::cgr::scene::observable_scene;
+use crate::cgr::scene::{distance_to_segment, observable_scene};
 use crate::geometry::Real;
 use crate::linemap::LineMap;
 
 /// Bumped whenever the file layout or the scene algorithm changes.
-const FORMAT: u64 = 2;
+const FORMAT: u64 = 3;
 
 /// Why a cached grid could not be used or written.
 #[derive(Debug, thiserror::Error)]
@@ -44,7 +45,8 @@ pub struct SceneGrid {
 impl SceneGrid {
     /// Computes the scene at every cell centre of a `cell`-metre grid over
     /// the map's bounding box, walls up to `range` metres, on `threads`
-    /// threads; each cell keeps the union of its 3 × 3 block's scenes.
+    /// threads; a cell within 1.5 cells of a wall keeps the union of its
+    /// 3 × 3 block's scenes.
     pub fn build(map: &LineMap, cell: Real, range: Real, threads: usize) -> Self {
         assert!(cell > 0.0 && range > 0.0, "cell size and range must be positive");
         let (x0, y0, x1, y1) = map.bounds();
@@ -76,11 +78,13 @@ impl SceneGrid {
             handles.into_iter().map(|h| h.join().expect("a scene thread panicked")).collect()
         });
         let centres: Vec<Vec<u32>> = chunks.into_iter().flatten().collect();
-        // A cell's scene is what its own and its eight neighbours' centres
-        // see: a robot in a doorway, whose cell centre lies in the wall
-        // beside it, still finds the walls of the rooms on both sides.
-        // Walls a neighbour sees behind an occluder cost a little time,
-        // not accuracy: a point matches the first wall its ray meets.
+        // A cell next to a wall keeps what its own and its eight
+        // neighbours' centres see: a robot beside a door jamb, whose cell
+        // centre lies across the wall, still finds the walls of its own
+        // room. Walls a neighbour sees behind an occluder cost a little
+        // time, not accuracy (a point matches the first wall its ray
+        // meets); cells in the open keep their own scene.
+        let near = 1.5 * cell;
         let mut offsets = Vec::with_capacity(width * height + 1);
         let mut lines = Vec::new();
         let mut ids = Vec::new();
@@ -88,6 +92,17 @@ impl SceneGrid {
         for j in 0..height {
             for i in 0..width {
                 ids.clear();
+                let own = &centres[j * width + i];
+                let centre = (x0 + (i as Real + 0.5) * cell, y0 + (j as Real + 0.5) * cell);
+                let by_a_wall = own.iter().any(|&l| {
+                    let w = &map.walls[l as usize];
+                    distance_to_segment(centre, w.a, w.b) < near
+                });
+                if !by_a_wall {
+                    lines.extend_from_slice(own);
+                    offsets.push(lines.len() as u32);
+                    continue;
+                }
                 for nj in j.saturating_sub(1)..(j + 2).min(height) {
                     for ni in i.saturating_sub(1)..(i + 2).min(width) {
                         ids.extend_from_slice(&centres[nj * width + ni]);
@@ -202,10 +217,15 @@ mod tests {
         let map = room();
         let grid = SceneGrid::build(&map, 0.5, 20.0, 2);
         assert_eq!(grid.size(), (20, 20));
-        for (x, y) in [(5.0, 2.0), (1.2, 8.7), (5.1, 8.0), (9.9, 0.1)] {
+        // Cells in the open keep their centre's scene; the last, in a
+        // corner, is by a wall and keeps its 3 × 3 block's.
+        for (x, y, by_a_wall) in [(5.0, 2.0, false), (1.2, 8.7, false), (5.1, 8.0, false), (9.9, 0.1, true)] {
             let (i, j) = ((x / 0.5_f64).floor() as i64, (y / 0.5_f64).floor() as i64);
             let mut want: Vec<u32> = Vec::new();
-            for (ni, nj) in (i - 1..=i + 1).flat_map(|ni| (j - 1..=j + 1).map(move |nj| (ni, nj))) {
+            let reach = i64::from(by_a_wall);
+            for (ni, nj) in
+                (i - reach..=i + reach).flat_map(|ni| (j - reach..=j + reach).map(move |nj| (ni, nj)))
+            {
                 if (0..20).contains(&ni) && (0..20).contains(&nj) {
                     let centre = ((ni as Real + 0.5) * 0.5, (nj as Real + 0.5) * 0.5);
                     want.extend(observable_scene(&map, centre, 20.0).iter().map(|v| v.line));
