@@ -191,7 +191,7 @@ impl DepthCamera {
             let z = h + t * d.2;
             if (0.0..=1.0).contains(&u) && (0.0..=top).contains(&z) {
                 let (ex, ey) = (c.0 - a.0, c.1 - a.1);
-                take(t, ((d.0 * -ey + d.1 * ex) / (ex.hypot(ey) * norm)).abs());
+                take(t, ((d.0 * -ey + d.1 * ex) / ((ex * ex + ey * ey).sqrt() * norm)).abs());
             }
         };
         for &i in walls {

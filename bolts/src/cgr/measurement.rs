@@ -115,7 +115,7 @@ pub fn evaluate(
         };
         let w = &map.walls[line as usize];
         let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
-        let len = ex.hypot(ey);
+        let len = (ex * ex + ey * ey).sqrt();
         let (lx, ly) = (-ey / len, ex / len);
         let (nx, ny) = (Real::from(n[0]), Real::from(n[1]));
         let (wx, wy) = (c * nx - s * ny, s * nx + c * ny);

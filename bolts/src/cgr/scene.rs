@@ -174,12 +174,12 @@ pub fn first_hit(
     x: (Real, Real),
     p: (Real, Real),
 ) -> Option<(u32, Real)> {
+    // The ray is not normalized (no square root per point): distances
+    // along it are in units of |p − x| until the one returned.
     let (dx, dy) = (p.0 - x.0, p.1 - x.1);
-    let norm = dx.hypot(dy);
-    if norm == 0.0 {
+    if dx == 0.0 && dy == 0.0 {
         return None;
     }
-    let (dx, dy) = (dx / norm, dy / norm);
     let mut best: Option<(u32, Real)> = None;
     for i in lines {
         let w = &map.walls[i as usize];
@@ -188,7 +188,7 @@ pub fn first_hit(
             best = Some((i, r));
         }
     }
-    best
+    best.map(|(i, r)| (i, r * (dx * dx + dy * dy).sqrt()))
 }
 
 #[cfg(test)]
