@@ -157,6 +157,7 @@ mod tests {
             normals: vec![[0.0, 0.0, -1.0], [0.0, -1.0, 0.0]],
             outliers: vec![],
             iterations: 1,
+            valid_pixels: 2,
         };
         let mount = CameraMount { x: 0.1, y: 0.0, height: 1.0, tilt: 0.0, yaw: 0.0 };
         let o = Observation2d::from_plane_filtered(&filtered, &mount, 0.5, 0.0, Pose2::IDENTITY);
