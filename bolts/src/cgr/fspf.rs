@@ -175,12 +175,21 @@ pub struct PlaneFilter {
     col_factor: Vec<f32>,
     row_factor: Vec<f32>,
     inliers: Vec<[f32; 3]>,
+    /// Per local sample, the misses that reject the neighbourhood there.
+    reject_at: Vec<usize>,
 }
 
 impl PlaneFilter {
     /// A filter for images from `camera`.
     pub fn new(options: FspfOptions, camera: Intrinsics) -> Self {
-        PlaneFilter { options, camera, col_factor: Vec::new(), row_factor: Vec::new(), inliers: Vec::new() }
+        PlaneFilter {
+            options,
+            camera,
+            col_factor: Vec::new(),
+            row_factor: Vec::new(),
+            inliers: Vec::new(),
+            reject_at: Vec::new(),
+        }
     }
 
     /// Filters `image` into `out` (cleared first), drawing from `rng`.
@@ -217,9 +226,17 @@ impl PlaneFilter {
         let need = (o.min_inlier_fraction * samples as Real) as usize;
         // More misses than this and the neighbourhood cannot pass.
         let max_misses = samples - need.min(samples);
-        // The shortcut only where it is stricter than nothing and weaker
-        // than the test itself (α above one half).
+        // Misses at which the check stops after each sample: more than
+        // the test allows, or the early checks' counts where they apply
+        // (only where stricter than nothing and weaker than the test
+        // itself: α above one half).
         let early = samples > 10 && 2 * need > samples;
+        let reject_at = &mut self.reject_at;
+        reject_at.clear();
+        reject_at.extend((0..samples).map(|i| {
+            let shortcut = EARLY_CHECKS.iter().find(|c| early && c.0 == i + 1).map_or(usize::MAX, |c| c.1);
+            shortcut.min(max_misses + 1)
+        }));
         let tolerance = o.tolerance as f32;
         let inliers = &mut self.inliers;
         // The frame's draws come from a PCG stream seeded from `rng`: a
@@ -266,9 +283,7 @@ impl PlaneFilter {
                 inliers[kept] = p;
                 kept += usize::from(on);
                 misses += usize::from(!on);
-                let doomed =
-                    EARLY_CHECKS.iter().any(|&(after, at_least)| i + 1 == after && misses >= at_least);
-                if misses > max_misses || (early && doomed) {
+                if misses >= reject_at[i] {
                     break;
                 }
             }
