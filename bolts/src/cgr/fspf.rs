@@ -272,7 +272,7 @@ impl PlaneFilter {
                 inliers.resize(samples, [0.0; 3]);
             }
             let (mut kept, mut misses) = (0, 0);
-            for i in 0..samples {
+            for &reject in reject_at.iter() {
                 let bits = draws.next_u64();
                 let r = (r0 + pick(bits as u32, -half_h, half_h)).clamp(0, h - 1) as usize;
                 let c = (c0 + pick((bits >> 32) as u32, -half_w, half_w)).clamp(0, w - 1) as usize;
@@ -283,7 +283,7 @@ impl PlaneFilter {
                 inliers[kept] = p;
                 kept += usize::from(on);
                 misses += usize::from(!on);
-                if misses >= reject_at[i] {
+                if misses >= reject {
                     break;
                 }
             }
