@@ -218,11 +218,6 @@ impl ParticleModel for ParfilModel {
         std::mem::size_of::<Pose2>() as u64
     }
 
-    fn weight_smoothing(&self) -> Real {
-        // Plain weights: log-weights divided by smoothing × N = 1.
-        1.0 / self.options.particles as Real
-    }
-
     fn resample_threshold(&self) -> Real {
         // Every iteration, as in the thesis.
         1.0

@@ -175,12 +175,10 @@ pub fn refine<'a>(
         // curvature (Levenberg–Marquardt), and every step stays within a
         // trust region.
         let damping = TRANSLATION_DAMPING * (e.curvature[0] + e.curvature[1]);
-        let step: Vec<Real> = (0..3)
-            .map(|k| {
-                let c = e.curvature[k] + if k < 2 { damping } else { 0.0 };
-                if c > 0.0 { e.gradient[k] / c } else { 0.0 }
-            })
-            .collect();
+        let step: [Real; 3] = std::array::from_fn(|k| {
+            let c = e.curvature[k] + if k < 2 { damping } else { 0.0 };
+            if c > 0.0 { e.gradient[k] / c } else { 0.0 }
+        });
         let translation = step[0].hypot(step[1]);
         let mut scale = (MAX_STEP.0 / translation).min(MAX_STEP.1 / step[2].abs()).min(1.0);
         let mut improved = false;

@@ -247,11 +247,6 @@ impl ParticleModel for CgrModel {
         std::mem::size_of::<Pose2>() as u64
     }
 
-    fn weight_smoothing(&self) -> Real {
-        // Plain likelihoods: log-weights divided by smoothing × N = 1.
-        1.0 / self.options.particles as Real
-    }
-
     fn resample_threshold(&self) -> Real {
         self.options.resample_threshold
     }

@@ -54,13 +54,13 @@ impl SceneGrid {
         let height = (((y1 - y0) / cell).ceil() as usize).max(1);
         let threads = threads.clamp(1, height);
         let rows_per = height.div_ceil(threads);
+        let centre_of = |i: usize, j: usize| (x0 + (i as Real + 0.5) * cell, y0 + (j as Real + 0.5) * cell);
         let row_scenes = |rows: std::ops::Range<usize>| -> Vec<Vec<u32>> {
             let mut out = Vec::with_capacity(rows.len() * width);
             for j in rows {
                 for i in 0..width {
-                    let centre = (x0 + (i as Real + 0.5) * cell, y0 + (j as Real + 0.5) * cell);
                     let mut ids: Vec<u32> =
-                        observable_scene(map, centre, range).iter().map(|v| v.line).collect();
+                        observable_scene(map, centre_of(i, j), range).iter().map(|v| v.line).collect();
                     ids.sort_unstable();
                     ids.dedup();
                     out.push(ids);
@@ -93,7 +93,7 @@ impl SceneGrid {
             for i in 0..width {
                 ids.clear();
                 let own = &centres[j * width + i];
-                let centre = (x0 + (i as Real + 0.5) * cell, y0 + (j as Real + 0.5) * cell);
+                let centre = centre_of(i, j);
                 let by_a_wall = own.iter().any(|&l| {
                     let w = &map.walls[l as usize];
                     distance_to_segment(centre, w.a, w.b) < near

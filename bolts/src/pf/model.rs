@@ -85,8 +85,11 @@ pub trait ParticleModel: Send + Sync + 'static {
     fn state_bytes(&self, state: &Self::State) -> u64;
 
     /// Smoothing of the weights: log-weights are divided by this × N
-    /// before exponentiating (GMapping's ogain).
-    fn weight_smoothing(&self) -> Real;
+    /// before exponentiating (GMapping's ogain). The default, 1 / N, takes
+    /// the likelihoods as they are.
+    fn weight_smoothing(&self) -> Real {
+        1.0 / self.particles() as Real
+    }
 
     /// Resample when Neff falls below this fraction of the particles.
     fn resample_threshold(&self) -> Real;
