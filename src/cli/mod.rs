@@ -7,6 +7,8 @@ mod run;
 mod sim;
 mod slam;
 mod speedup;
+#[cfg(feature = "cluster")]
+mod worker;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -98,6 +100,9 @@ enum Command {
     Sim(sim::SimArgs),
     /// List the component kinds this binary knows.
     Kinds,
+    /// Host tasks for a cluster's coordinator (cluster mode).
+    #[cfg(feature = "cluster")]
+    Worker(worker::WorkerArgs),
 }
 
 /// Parses arguments, runs the command, maps errors to exit codes.
@@ -140,6 +145,8 @@ pub(crate) fn main() -> ExitCode {
         Command::Slam(args) => slam::slam(&args),
         Command::Speedup(args) => speedup::speedup(&args),
         Command::Localize(args) => localize::localize(&args),
+        #[cfg(feature = "cluster")]
+        Command::Worker(args) => worker::worker(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");

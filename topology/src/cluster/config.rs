@@ -1,0 +1,383 @@
+//! The cluster file (`CLUSTER.toml`): which worker processes exist and
+//! where they listen, where each component's tasks go, and the TLS
+//! material that lets peers in. Endpoints are explicit; nothing relies on
+//! multicast discovery.
+//!
+//! ```toml
+//! [cluster]
+//! name = "lab"                        # key prefix: squall/lab/...
+//!
+//! [[worker]]
+//! name = "w1"
+//! endpoint = "tcp/127.0.0.1:7447"     # where `squall worker --listen` listens
+//!
+//! [placement]                         # optional; the rest is spread evenly
+//! matcher = ["w1", "w2", "w1"]        # task i of `matcher` on the i-th worker
+//!
+//! [tls]                               # optional: mutual TLS, then endpoints are tls/
+//! root_ca = "ca.pem"                  # paths relative to this file
+//! certificate = "coordinator.pem"
+//! private_key = "coordinator.key"
+//! ```
+
+use std::collections::{BTreeMap, HashSet};
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::spec::{SpecError, SpecErrors};
+
+/// A zenoh locator that a worker listens on: `tcp/HOST:PORT` or
+/// `tls/HOST:PORT`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Endpoint {
+    /// `tcp` or `tls`.
+    pub protocol: Protocol,
+    /// Host name or address (IPv6 in brackets).
+    pub host: String,
+    /// TCP port.
+    pub port: u16,
+}
+
+/// The transports cluster mode speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Protocol {
+    /// Plain TCP (trusted networks, loopback).
+    Tcp,
+    /// TLS over TCP, mutually authenticated.
+    Tls,
+}
+
+impl Endpoint {
+    /// Parses `tcp/HOST:PORT` or `tls/HOST:PORT`; the error says what was
+    /// expected.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let expected = || format!("expected tcp/HOST:PORT or tls/HOST:PORT, found {text:?}");
+        let (protocol, address) = match text.split_once('/') {
+            Some(("tcp", address)) => (Protocol::Tcp, address),
+            Some(("tls", address)) => (Protocol::Tls, address),
+            _ => return Err(expected()),
+        };
+        let (host, port) = match address.strip_prefix('[') {
+            // [IPv6]:PORT
+            Some(rest) => rest.split_once("]:").map(|(h, p)| (&address[..h.len() + 2], p)),
+            None => address.rsplit_once(':'),
+        }
+        .ok_or_else(expected)?;
+        let port =
+            port.parse::<u16>().map_err(|_| format!("{}: port {port:?} is not 0–65535", expected()))?;
+        let bracketed = host.starts_with('[') && host.ends_with(']');
+        if host.is_empty() || (host.contains(':') && !bracketed) || host.contains('/') {
+            return Err(expected());
+        }
+        Ok(Endpoint { protocol, host: host.to_string(), port })
+    }
+}
+
+impl std::fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let protocol = match self.protocol {
+            Protocol::Tcp => "tcp",
+            Protocol::Tls => "tls",
+        };
+        write!(f, "{protocol}/{}:{}", self.host, self.port)
+    }
+}
+
+/// A worker process of the cluster.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WorkerSpec {
+    /// Its name, unique in the cluster.
+    pub name: String,
+    /// Where it listens.
+    pub endpoint: Endpoint,
+    /// The line that declares it.
+    pub line: usize,
+}
+
+/// Mutual TLS material, paths resolved against the cluster file's folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TlsSpec {
+    /// The certificate authority every peer's certificate must chain to.
+    pub root_ca: PathBuf,
+    /// This process's certificate.
+    pub certificate: PathBuf,
+    /// Its private key.
+    pub private_key: PathBuf,
+}
+
+/// A checked cluster file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ClusterSpec {
+    /// The file, as named in errors.
+    pub file: String,
+    /// The cluster's name: the first part of every key it uses.
+    pub name: String,
+    /// The workers, in file order.
+    pub workers: Vec<WorkerSpec>,
+    /// Per component, the worker of each task (by index into `workers`);
+    /// components not listed are spread evenly.
+    pub placement: BTreeMap<String, Vec<usize>>,
+    /// Mutual TLS, if configured.
+    pub tls: Option<TlsSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCluster {
+    cluster: Spanned<RawHeader>,
+    #[serde(default)]
+    worker: Vec<Spanned<RawWorker>>,
+    #[serde(default)]
+    placement: BTreeMap<String, Spanned<Vec<Spanned<String>>>>,
+    tls: Option<Spanned<RawTls>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHeader {
+    name: Spanned<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWorker {
+    name: Spanned<String>,
+    endpoint: Spanned<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTls {
+    root_ca: Spanned<String>,
+    certificate: Spanned<String>,
+    private_key: Spanned<String>,
+}
+
+/// 1-based line of byte `offset` in `text`.
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+/// A name usable in a zenoh key: letters, digits, `-` and `_`.
+fn is_key_safe(name: &str) -> bool {
+    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+impl ClusterSpec {
+    /// Reads and checks a cluster file.
+    pub fn load(path: &Path) -> Result<Self, SpecErrors> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| SpecError {
+            file: file.as_str().into(),
+            line: 0,
+            component: None,
+            message: format!("cannot read the cluster file: {e}"),
+        })?;
+        let folder = path.parent().unwrap_or(Path::new("."));
+        Self::parse(&file, &text, folder)
+    }
+
+    /// Checks cluster-file text; `file` names it in errors and relative
+    /// TLS paths are taken from `folder`. Reports every problem found.
+    pub fn parse(file: &str, text: &str, folder: &Path) -> Result<Self, SpecErrors> {
+        let error =
+            |line: usize, message: String| SpecError { file: file.into(), line, component: None, message };
+        let at = |offset: usize, message: String| error(line_of(text, offset), message);
+        let raw: RawCluster = toml::from_str(text).map_err(|e| {
+            let line = e.span().map_or(0, |s| line_of(text, s.start));
+            error(line, e.message().trim().to_string())
+        })?;
+        let mut errors = Vec::new();
+        let header = raw.cluster.get_ref();
+        if !is_key_safe(header.name.get_ref()) {
+            errors.push(at(
+                header.name.span().start,
+                format!("cluster name {:?}: expected letters, digits, - or _", header.name.get_ref()),
+            ));
+        }
+        let mut workers = Vec::new();
+        // Every declared name, in file order: placement refers to these
+        // (a worker whose endpoint is wrong is still declared).
+        let mut declared = Vec::new();
+        let mut names = HashSet::new();
+        for w in &raw.worker {
+            let (span, w) = (w.span(), w.get_ref());
+            let name = w.name.get_ref();
+            declared.push(name.clone());
+            if !is_key_safe(name) {
+                errors.push(at(
+                    w.name.span().start,
+                    format!("worker name {name:?}: expected letters, digits, - or _"),
+                ));
+            } else if !names.insert(name.clone()) {
+                errors.push(at(w.name.span().start, format!("worker {name:?} is declared twice")));
+            }
+            match Endpoint::parse(w.endpoint.get_ref()) {
+                Ok(endpoint) => {
+                    workers.push(WorkerSpec { name: name.clone(), endpoint, line: line_of(text, span.start) })
+                }
+                Err(message) => {
+                    errors.push(at(w.endpoint.span().start, format!("worker {name:?}: {message}")))
+                }
+            }
+        }
+        if raw.worker.is_empty() {
+            errors.push(error(0, "no [[worker]]: a cluster needs at least one worker".into()));
+        }
+        let mut placement = BTreeMap::new();
+        for (component, tasks) in &raw.placement {
+            let mut indices = Vec::new();
+            for worker in tasks.get_ref() {
+                match declared.iter().position(|w| w == worker.get_ref()) {
+                    Some(i) => indices.push(i),
+                    None => errors.push(at(
+                        worker.span().start,
+                        format!("placement of {component:?}: no worker named {:?}", worker.get_ref()),
+                    )),
+                }
+            }
+            if tasks.get_ref().is_empty() {
+                errors.push(at(
+                    tasks.span().start,
+                    format!("placement of {component:?}: expected a worker per task"),
+                ));
+            }
+            placement.insert(component.clone(), indices);
+        }
+        let tls = raw.tls.as_ref().map(|t| {
+            let resolve = |p: &Spanned<String>| folder.join(p.get_ref());
+            let t = t.get_ref();
+            for p in [&t.root_ca, &t.certificate, &t.private_key] {
+                if !resolve(p).is_file() {
+                    errors.push(at(p.span().start, format!("no such file: {}", resolve(p).display())));
+                }
+            }
+            TlsSpec {
+                root_ca: resolve(&t.root_ca),
+                certificate: resolve(&t.certificate),
+                private_key: resolve(&t.private_key),
+            }
+        });
+        let wanted = if tls.is_some() { Protocol::Tls } else { Protocol::Tcp };
+        for w in &workers {
+            if w.endpoint.protocol != wanted {
+                let why = if tls.is_some() {
+                    "with [tls], endpoints are tls/"
+                } else {
+                    "tls/ needs a [tls] section"
+                };
+                errors.push(error(w.line, format!("worker {:?}: {why}", w.name)));
+            }
+        }
+        if !errors.is_empty() {
+            return Err(SpecErrors(errors));
+        }
+        Ok(ClusterSpec {
+            file: file.to_string(),
+            name: header.name.get_ref().clone(),
+            workers,
+            placement,
+            tls,
+        })
+    }
+
+    /// The worker of each of `tasks` tasks of `component`: the explicit
+    /// placement where the file gives one (its length must match), else
+    /// spread evenly (task i on worker i mod n).
+    pub fn place(&self, component: &str, tasks: usize) -> Result<Vec<usize>, String> {
+        match self.placement.get(component) {
+            Some(explicit) if explicit.len() == tasks => Ok(explicit.clone()),
+            Some(explicit) => Err(format!(
+                "{}: placement of {component:?} names {} workers, but it has {tasks} tasks",
+                self.file,
+                explicit.len()
+            )),
+            None => Ok((0..tasks).map(|i| i % self.workers.len()).collect()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TWO: &str = "[cluster]\nname = \"lab\"\n\n[[worker]]\nname = \"w1\"\nendpoint = \"tcp/127.0.0.1:7447\"\n\n[[worker]]\nname = \"w2\"\nendpoint = \"tcp/[::1]:7448\"\n\n[placement]\nmatcher = [\"w2\", \"w1\", \"w2\"]\n";
+
+    fn parse(text: &str) -> Result<ClusterSpec, SpecErrors> {
+        ClusterSpec::parse("c.toml", text, Path::new("."))
+    }
+
+    fn messages(text: &str) -> Vec<String> {
+        parse(text).unwrap_err().0.iter().map(ToString::to_string).collect()
+    }
+
+    #[test]
+    fn a_cluster_file_gives_workers_and_placement() {
+        let c = parse(TWO).unwrap();
+        assert_eq!(c.name, "lab");
+        assert_eq!(c.workers.len(), 2);
+        assert_eq!(
+            c.workers[1].endpoint,
+            Endpoint { protocol: Protocol::Tcp, host: "[::1]".into(), port: 7448 }
+        );
+        assert_eq!(c.workers[1].endpoint.to_string(), "tcp/[::1]:7448");
+        assert_eq!(c.place("matcher", 3).unwrap(), vec![1, 0, 1]);
+        assert_eq!(c.place("resampler", 3).unwrap(), vec![0, 1, 0]);
+        assert!(c.place("matcher", 2).unwrap_err().contains("names 3 workers, but it has 2 tasks"));
+    }
+
+    #[test]
+    fn endpoints_must_say_protocol_host_and_port() {
+        for bad in [
+            "127.0.0.1:7447",
+            "udp/1.2.3.4:1",
+            "tcp/host",
+            "tcp/:80",
+            "tcp/h:99999",
+            "tcp/::1:80",
+            "tcp/[::1]",
+        ] {
+            assert!(Endpoint::parse(bad).is_err(), "{bad} accepted");
+        }
+        assert_eq!(Endpoint::parse("tls/robot.lan:7447").unwrap().protocol, Protocol::Tls);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_what_was_expected() {
+        let text = TWO.replace("tcp/[::1]:7448", "tcp/[::1]").replace("[\"w2\", \"w1\"", "[\"w9\", \"w1\"");
+        let m = messages(&text);
+        assert_eq!(m.len(), 2, "{m:?}");
+        assert_eq!(
+            m[0],
+            "c.toml:10: worker \"w2\": expected tcp/HOST:PORT or tls/HOST:PORT, found \"tcp/[::1]\""
+        );
+        assert!(m[1].starts_with("c.toml:13: placement of \"matcher\": no worker named \"w9\""), "{m:?}");
+        let twice = TWO.replace("w2", "w1");
+        assert_eq!(messages(&twice), vec!["c.toml:9: worker \"w1\" is declared twice"]);
+        let unknown = format!("{TWO}\n[extra]\n");
+        assert!(messages(&unknown)[0].contains("unknown field `extra`"), "{:?}", messages(&unknown));
+        assert!(messages("[cluster]\nname = \"lab\"\n")[0].contains("no [[worker]]"));
+    }
+
+    #[test]
+    fn tls_needs_its_files_and_tls_endpoints() {
+        let folder = std::env::temp_dir().join(format!("squall-cluster-{}", std::process::id()));
+        std::fs::create_dir_all(&folder).unwrap();
+        for f in ["ca.pem", "me.pem", "me.key"] {
+            std::fs::write(folder.join(f), "x").unwrap();
+        }
+        let tls = "\n[tls]\nroot_ca = \"ca.pem\"\ncertificate = \"me.pem\"\nprivate_key = \"me.key\"\n";
+        let with_tls = format!("{}{tls}", TWO.replace("tcp/", "tls/"));
+        let c = ClusterSpec::parse("c.toml", &with_tls, &folder).unwrap();
+        assert_eq!(c.tls.unwrap().root_ca, folder.join("ca.pem"));
+        let plain = format!("{TWO}{tls}");
+        let m = ClusterSpec::parse("c.toml", &plain, &folder).unwrap_err().to_string();
+        assert!(m.contains("c.toml:4: worker \"w1\": with [tls], endpoints are tls/"), "{m}");
+        let missing = with_tls.replace("me.key", "gone.key");
+        let m = ClusterSpec::parse("c.toml", &missing, &folder).unwrap_err().to_string();
+        assert!(m.contains("no such file") && m.contains("gone.key"), "{m}");
+        std::fs::remove_dir_all(&folder).unwrap();
+    }
+}

@@ -1,0 +1,257 @@
+//! zenoh sessions for the processes of a cluster: explicit endpoints, no
+//! multicast scouting, mutual TLS when the cluster file configures it;
+//! and a worker's presence (a liveliness token the coordinator watches)
+//! and control channel.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use zenoh::Session;
+use zenoh::sample::SampleKind;
+
+use crate::cluster::config::{Endpoint, TlsSpec};
+use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections};
+
+/// Errors opening or using a cluster session.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// zenoh refused the configuration or could not open the session.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A worker did not answer in time.
+    #[error("worker at {endpoint} did not answer within {secs} s")]
+    NoAnswer {
+        /// The worker's endpoint.
+        endpoint: String,
+        /// How long we waited.
+        secs: f64,
+    },
+}
+
+fn zenoh_error(e: impl std::fmt::Display) -> SessionError {
+    SessionError::Zenoh(e.to_string())
+}
+
+/// Where a session listens and what it connects to.
+#[derive(Debug, Clone, Default)]
+pub struct SessionOptions {
+    /// Endpoints to listen on (a worker's own).
+    pub listen: Vec<Endpoint>,
+    /// Endpoints to connect to (the workers, for a coordinator).
+    pub connect: Vec<Endpoint>,
+    /// Mutual TLS material.
+    pub tls: Option<TlsSpec>,
+}
+
+/// Opens a session: peer mode, only the given endpoints, no scouting.
+pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
+    let mut config = zenoh::Config::default();
+    let list = |endpoints: &[Endpoint]| {
+        let quoted: Vec<String> = endpoints.iter().map(|e| format!("{:?}", e.to_string())).collect();
+        format!("[{}]", quoted.join(","))
+    };
+    let mut set = |key: &str, value: String| config.insert_json5(key, &value).map_err(zenoh_error);
+    set("mode", "\"peer\"".into())?;
+    set("listen/endpoints", list(&options.listen))?;
+    set("connect/endpoints", list(&options.connect))?;
+    set("scouting/multicast/enabled", "false".into())?;
+    set("scouting/gossip/enabled", "false".into())?;
+    if let Some(tls) = &options.tls {
+        let path = |p: &std::path::Path| format!("{:?}", p.display().to_string());
+        set("transport/link/tls/root_ca_certificate", path(&tls.root_ca))?;
+        set("transport/link/tls/listen_certificate", path(&tls.certificate))?;
+        set("transport/link/tls/listen_private_key", path(&tls.private_key))?;
+        set("transport/link/tls/connect_certificate", path(&tls.certificate))?;
+        set("transport/link/tls/connect_private_key", path(&tls.private_key))?;
+        set("transport/link/tls/enable_mtls", "true".into())?;
+    }
+    zenoh::open(config).await.map_err(zenoh_error)
+}
+
+/// The key part naming a worker: its listen endpoint, made key-safe.
+pub fn worker_key(endpoint: &Endpoint) -> String {
+    endpoint.to_string().replace(['/', ':'], "_")
+}
+
+/// The key of a worker's liveliness token.
+pub fn presence_key(endpoint: &Endpoint) -> String {
+    format!("squall/worker/{}", worker_key(endpoint))
+}
+
+fn control_key(endpoint: &Endpoint) -> String {
+    format!("squall/control/{}", worker_key(endpoint))
+}
+
+fn reply_key(endpoint: &Endpoint) -> String {
+    format!("squall/reply/{}", worker_key(endpoint))
+}
+
+/// A worker process's presence in the cluster: its session, its
+/// liveliness token, and a task answering control frames. Dropping it
+/// withdraws the token.
+#[derive(Debug)]
+pub struct WorkerPresence {
+    session: Session,
+    rejections: Arc<Rejections>,
+    stop: tokio::sync::watch::Receiver<bool>,
+}
+
+impl WorkerPresence {
+    /// Opens the worker's session on `options.listen[0]` and announces it.
+    pub async fn start(options: &SessionOptions) -> Result<Self, SessionError> {
+        let endpoint = options
+            .listen
+            .first()
+            .cloned()
+            .ok_or_else(|| SessionError::Zenoh("a worker needs a listen endpoint".into()))?;
+        let session = open(options).await?;
+        let token = session.liveliness().declare_token(presence_key(&endpoint)).await.map_err(zenoh_error)?;
+        let control = session.declare_subscriber(control_key(&endpoint)).await.map_err(zenoh_error)?;
+        let rejections = Arc::new(Rejections::default());
+        let (stopped, stop) = tokio::sync::watch::channel(false);
+        let (answer, counts, name) = (session.clone(), rejections.clone(), worker_key(&endpoint));
+        tokio::spawn(async move {
+            let _token = token;
+            while let Ok(sample) = control.recv_async().await {
+                let bytes = sample.payload().to_bytes();
+                match Frame::decode(&bytes, DEFAULT_MAX_FRAME) {
+                    Ok(Frame::Control(Control::Ping { nonce })) => {
+                        let pong = Frame::Control(Control::Pong { nonce, worker: name.clone() });
+                        if let Err(e) = answer.put(reply_key(&endpoint), pong.encode()).await {
+                            tracing::warn!("worker {name}: cannot answer a ping: {e}");
+                        }
+                    }
+                    Ok(Frame::Control(Control::Stop)) => {
+                        let _ = stopped.send(true);
+                    }
+                    Ok(other) => tracing::warn!("worker {name}: unexpected on the control key: {other:?}"),
+                    Err(e) => {
+                        tracing::warn!("worker {name}: refused a control frame: {e}");
+                        counts.count(&e);
+                    }
+                }
+            }
+        });
+        Ok(WorkerPresence { session, rejections, stop })
+    }
+
+    /// The worker's session.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+
+    /// Frames refused so far: (too large, malformed).
+    pub fn rejections(&self) -> (u64, u64) {
+        self.rejections.totals()
+    }
+
+    /// Waits until a coordinator sends `Stop`.
+    pub async fn stopped(&mut self) {
+        let _ = self.stop.wait_for(|&s| s).await;
+    }
+}
+
+/// Asks the worker at `endpoint` whether it is there; its name on success.
+pub async fn ping(session: &Session, endpoint: &Endpoint, timeout: Duration) -> Result<String, SessionError> {
+    let replies = session.declare_subscriber(reply_key(endpoint)).await.map_err(zenoh_error)?;
+    let nonce = rand_nonce();
+    let ping = Frame::Control(Control::Ping { nonce }).encode();
+    let deadline = tokio::time::Instant::now() + timeout;
+    // The first puts may go out before the link is up: repeat until answered.
+    loop {
+        session.put(control_key(endpoint), ping.clone()).await.map_err(zenoh_error)?;
+        let wait = (deadline - tokio::time::Instant::now()).min(Duration::from_millis(200));
+        if let Ok(Ok(sample)) = tokio::time::timeout(wait, replies.recv_async()).await
+            && let Ok(Frame::Control(Control::Pong { nonce: n, worker })) =
+                Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME)
+            && n == nonce
+        {
+            return Ok(worker);
+        }
+        if tokio::time::Instant::now() >= deadline {
+            return Err(SessionError::NoAnswer {
+                endpoint: endpoint.to_string(),
+                secs: timeout.as_secs_f64(),
+            });
+        }
+    }
+}
+
+/// Tells the worker at `endpoint` to stop.
+pub async fn stop(session: &Session, endpoint: &Endpoint) -> Result<(), SessionError> {
+    session.put(control_key(endpoint), Frame::Control(Control::Stop).encode()).await.map_err(zenoh_error)
+}
+
+/// Watches workers' liveliness: yields (worker key, alive) as tokens come
+/// and go, starting with those already present.
+pub async fn watch_workers(
+    session: &Session,
+) -> Result<tokio::sync::mpsc::UnboundedReceiver<(String, bool)>, SessionError> {
+    let subscriber = session
+        .liveliness()
+        .declare_subscriber("squall/worker/*")
+        .history(true)
+        .await
+        .map_err(zenoh_error)?;
+    let (send, receive) = tokio::sync::mpsc::unbounded_channel();
+    tokio::spawn(async move {
+        while let Ok(sample) = subscriber.recv_async().await {
+            let key = sample.key_expr().as_str().trim_start_matches("squall/worker/").to_string();
+            if send.send((key, sample.kind() == SampleKind::Put)).is_err() {
+                break;
+            }
+        }
+    });
+    Ok(receive)
+}
+
+/// A nonce that differs between calls and processes.
+fn rand_nonce() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u128(
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default().as_nanos(),
+    );
+    h.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cluster::config::Protocol;
+
+    fn free_endpoint() -> Endpoint {
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        Endpoint { protocol: Protocol::Tcp, host: "127.0.0.1".into(), port }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_coordinator_sees_a_worker_come_answer_and_go() {
+        let endpoint = free_endpoint();
+        let worker_options = SessionOptions { listen: vec![endpoint.clone()], ..SessionOptions::default() };
+        let mut worker = WorkerPresence::start(&worker_options).await.unwrap();
+        let coordinator =
+            open(&SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() })
+                .await
+                .unwrap();
+        let mut presence = watch_workers(&coordinator).await.unwrap();
+        let name = ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
+        assert_eq!(name, worker_key(&endpoint));
+        let seen = tokio::time::timeout(Duration::from_secs(10), presence.recv()).await.unwrap();
+        assert_eq!(seen, Some((worker_key(&endpoint), true)));
+        // Garbage on the control key is refused and counted, not fatal.
+        coordinator.put(control_key(&endpoint), b"not a frame".to_vec()).await.unwrap();
+        let name_again = ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
+        assert_eq!(name_again, name);
+        assert_eq!(worker.rejections(), (0, 1));
+        stop(&coordinator, &endpoint).await.unwrap();
+        tokio::time::timeout(Duration::from_secs(10), worker.stopped()).await.unwrap();
+        worker.session().close().await.unwrap();
+        drop(worker);
+        let gone = tokio::time::timeout(Duration::from_secs(10), presence.recv()).await.unwrap();
+        assert_eq!(gone, Some((worker_key(&endpoint), false)));
+        // Nobody listens there any more.
+        let silent = ping(&coordinator, &endpoint, Duration::from_millis(600)).await;
+        assert!(matches!(silent, Err(SessionError::NoAnswer { .. })), "{silent:?}");
+    }
+}
