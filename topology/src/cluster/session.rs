@@ -7,6 +7,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use zenoh::Session;
+use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::SampleKind;
 
 use crate::cluster::config::{Endpoint, TlsSpec};
@@ -78,22 +79,34 @@ pub fn presence_key(endpoint: &Endpoint) -> String {
     format!("squall/worker/{}", worker_key(endpoint))
 }
 
-fn control_key(endpoint: &Endpoint) -> String {
+/// The key a worker takes control frames on.
+pub fn control_key(endpoint: &Endpoint) -> String {
     format!("squall/control/{}", worker_key(endpoint))
 }
 
-fn reply_key(endpoint: &Endpoint) -> String {
+/// The key a worker answers on.
+pub fn reply_key(endpoint: &Endpoint) -> String {
     format!("squall/reply/{}", worker_key(endpoint))
 }
 
+/// Why a worker stops.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// A coordinator sent `Stop`.
+    Told,
+    /// Every coordinator it had seen is gone (killed, or its link lost):
+    /// a worker does not outlive its run.
+    CoordinatorLost,
+}
+
 /// A worker process's presence in the cluster: its session, its
-/// liveliness token, and a task answering control frames. Dropping it
-/// withdraws the token.
+/// liveliness token, a task answering control frames and one watching
+/// the coordinators. Dropping it withdraws the token.
 #[derive(Debug)]
 pub struct WorkerPresence {
     session: Session,
     rejections: Arc<Rejections>,
-    stop: tokio::sync::watch::Receiver<bool>,
+    stop: tokio::sync::watch::Receiver<Option<StopReason>>,
 }
 
 impl WorkerPresence {
@@ -108,7 +121,9 @@ impl WorkerPresence {
         let token = session.liveliness().declare_token(presence_key(&endpoint)).await.map_err(zenoh_error)?;
         let control = session.declare_subscriber(control_key(&endpoint)).await.map_err(zenoh_error)?;
         let rejections = Arc::new(Rejections::default());
-        let (stopped, stop) = tokio::sync::watch::channel(false);
+        let (stopped, stop) = tokio::sync::watch::channel(None);
+        let stopped = Arc::new(stopped);
+        watch_coordinators(&session, stopped.clone()).await?;
         let (answer, counts, name) = (session.clone(), rejections.clone(), worker_key(&endpoint));
         tokio::spawn(async move {
             let _token = token;
@@ -122,7 +137,7 @@ impl WorkerPresence {
                         }
                     }
                     Ok(Frame::Control(Control::Stop)) => {
-                        let _ = stopped.send(true);
+                        let _ = stopped.send(Some(StopReason::Told));
                     }
                     Ok(other) => tracing::warn!("worker {name}: unexpected on the control key: {other:?}"),
                     Err(e) => {
@@ -145,10 +160,47 @@ impl WorkerPresence {
         self.rejections.totals()
     }
 
-    /// Waits until a coordinator sends `Stop`.
-    pub async fn stopped(&mut self) {
-        let _ = self.stop.wait_for(|&s| s).await;
+    /// Waits until a coordinator sends `Stop` or the coordinators are gone.
+    pub async fn stopped(&mut self) -> StopReason {
+        match self.stop.wait_for(Option::is_some).await {
+            Ok(reason) => reason.unwrap_or(StopReason::Told),
+            Err(_) => StopReason::Told,
+        }
     }
+}
+
+/// Announces a coordinator: workers that see it go stop. Keep the token
+/// for the run.
+pub async fn announce_coordinator(session: &Session) -> Result<LivelinessToken, SessionError> {
+    let key = format!("squall/coordinator/{}", session.zid());
+    session.liveliness().declare_token(key).await.map_err(zenoh_error)
+}
+
+/// Follows the coordinators' tokens; once every one seen is gone, tells
+/// the worker to stop.
+async fn watch_coordinators(
+    session: &Session,
+    stopped: Arc<tokio::sync::watch::Sender<Option<StopReason>>>,
+) -> Result<(), SessionError> {
+    let subscriber = session
+        .liveliness()
+        .declare_subscriber("squall/coordinator/*")
+        .history(true)
+        .await
+        .map_err(zenoh_error)?;
+    tokio::spawn(async move {
+        let mut alive = std::collections::HashSet::new();
+        while let Ok(sample) = subscriber.recv_async().await {
+            let key = sample.key_expr().as_str().to_string();
+            if sample.kind() == SampleKind::Put {
+                alive.insert(key);
+            } else if alive.remove(&key) && alive.is_empty() {
+                tracing::warn!("worker: the coordinator {key} is gone; stopping");
+                let _ = stopped.send(Some(StopReason::CoordinatorLost));
+            }
+        }
+    });
+    Ok(())
 }
 
 /// Asks the worker at `endpoint` whether it is there; its name on success.
@@ -245,7 +297,8 @@ mod tests {
         assert_eq!(name_again, name);
         assert_eq!(worker.rejections(), (0, 1));
         stop(&coordinator, &endpoint).await.unwrap();
-        tokio::time::timeout(Duration::from_secs(10), worker.stopped()).await.unwrap();
+        let reason = tokio::time::timeout(Duration::from_secs(10), worker.stopped()).await.unwrap();
+        assert_eq!(reason, StopReason::Told);
         worker.session().close().await.unwrap();
         drop(worker);
         let gone = tokio::time::timeout(Duration::from_secs(10), presence.recv()).await.unwrap();
@@ -253,5 +306,33 @@ mod tests {
         // Nobody listens there any more.
         let silent = ping(&coordinator, &endpoint, Duration::from_millis(600)).await;
         assert!(matches!(silent, Err(SessionError::NoAnswer { .. })), "{silent:?}");
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_worker_stops_when_its_coordinator_is_gone() {
+        let endpoint = free_endpoint();
+        let worker_options = SessionOptions { listen: vec![endpoint.clone()], ..SessionOptions::default() };
+        let mut worker = WorkerPresence::start(&worker_options).await.unwrap();
+        let coordinator =
+            open(&SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() })
+                .await
+                .unwrap();
+        let token = announce_coordinator(&coordinator).await.unwrap();
+        ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
+        // Once the worker's side sees the coordinator's token, it dies.
+        let seen = async {
+            loop {
+                let replies = worker.session().liveliness().get("squall/coordinator/*").await.unwrap();
+                if replies.recv_async().await.is_ok() {
+                    break;
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        };
+        tokio::time::timeout(Duration::from_secs(10), seen).await.unwrap();
+        drop(token);
+        coordinator.close().await.unwrap();
+        let reason = tokio::time::timeout(Duration::from_secs(10), worker.stopped()).await.unwrap();
+        assert_eq!(reason, StopReason::CoordinatorLost);
     }
 }
