@@ -158,7 +158,14 @@ impl Cell {
 
 /// An occupancy grid that grows on demand; cell (0, 0) is at world
 /// (`origin`), cells are `resolution` metres.
+///
+/// A grid that arrives from elsewhere (another process, a file) is checked
+/// as it is read: a finite positive resolution, an index whose size
+/// matches its dimensions, finite mean hit points, and wall and free bits
+/// that agree with the cells. A grid that fails is an error, not a later
+/// panic or a silently wrong match.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(into = "GridWire", try_from = "GridWire")]
 pub struct TiledGrid {
     resolution: Real,
     /// 1 / `resolution`: a cell lookup multiplies rather than divides.
@@ -176,6 +183,89 @@ pub struct TiledGrid {
     /// counter was last taken.
     #[serde(skip)]
     clones: u64,
+}
+
+/// A grid as it travels: everything but the derived per-metre factor and
+/// the clone counter.
+#[derive(Serialize, Deserialize)]
+struct GridWire {
+    resolution: Real,
+    origin: (Real, Real),
+    tile_min: (i64, i64),
+    tiles_wide: usize,
+    tiles_high: usize,
+    tiles: Vec<Option<Arc<Tile>>>,
+    wall_threshold: Real,
+}
+
+impl From<TiledGrid> for GridWire {
+    fn from(g: TiledGrid) -> Self {
+        GridWire {
+            resolution: g.resolution,
+            origin: g.origin,
+            tile_min: g.tile_min,
+            tiles_wide: g.tiles_wide,
+            tiles_high: g.tiles_high,
+            tiles: g.tiles,
+            wall_threshold: g.wall_threshold,
+        }
+    }
+}
+
+impl TryFrom<GridWire> for TiledGrid {
+    type Error = String;
+
+    fn try_from(w: GridWire) -> Result<Self, String> {
+        if !(w.resolution.is_finite() && w.resolution > 0.0) {
+            return Err(format!("grid resolution {} is not a positive number of metres", w.resolution));
+        }
+        if !(w.origin.0.is_finite() && w.origin.1.is_finite()) {
+            return Err(format!("grid origin {:?} is not finite", w.origin));
+        }
+        if !(0.0..=1.0).contains(&w.wall_threshold) {
+            return Err(format!("wall threshold {} is not an occupancy in 0..=1", w.wall_threshold));
+        }
+        let expected = w.tiles_wide.checked_mul(w.tiles_high);
+        if expected != Some(w.tiles.len()) {
+            return Err(format!(
+                "a grid index of {} × {} tiles holds {} entries",
+                w.tiles_wide,
+                w.tiles_high,
+                w.tiles.len()
+            ));
+        }
+        let reach = |min: i64, n: usize| i64::try_from(n).ok().and_then(|n| min.checked_add(n));
+        if reach(w.tile_min.0, w.tiles_wide).is_none() || reach(w.tile_min.1, w.tiles_high).is_none() {
+            return Err(format!("grid tiles from {:?} reach beyond the coordinates", w.tile_min));
+        }
+        for (i, tile) in w.tiles.iter().enumerate() {
+            let Some(tile) = tile else { continue };
+            for (j, cell) in tile.cells.iter().enumerate() {
+                let (x, y) = (j % TILE_SIDE, j / TILE_SIDE);
+                if cell.hits > 0 && !(cell.mean_x.is_finite() && cell.mean_y.is_finite()) {
+                    return Err(format!("tile {i}, cell ({x}, {y}): mean hit point is not finite"));
+                }
+                let wall = (tile.walls[y] >> x) & 1 == 1;
+                let free = (tile.free[y] >> x) & 1 == 1;
+                if wall != cell.is_wall(w.wall_threshold) || free != cell.is_free(w.wall_threshold) {
+                    return Err(format!(
+                        "tile {i}, cell ({x}, {y}): wall and free bits disagree with the cell"
+                    ));
+                }
+            }
+        }
+        Ok(TiledGrid {
+            resolution: w.resolution,
+            per_metre: 1.0 / w.resolution,
+            origin: w.origin,
+            tile_min: w.tile_min,
+            tiles_wide: w.tiles_wide,
+            tiles_high: w.tiles_high,
+            tiles: w.tiles,
+            wall_threshold: w.wall_threshold,
+            clones: 0,
+        })
+    }
 }
 
 impl TiledGrid {
@@ -513,6 +603,50 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn a_grid_survives_the_wire_and_a_damaged_one_is_refused() {
+        let mut g = TiledGrid::new(0.05, (1.0, -2.0));
+        for x in -40..40 {
+            g.update((x, 3), |c| c.add_hit(x as f32 * 0.05, 0.15));
+            g.update((x, 2), |c| c.visits += 1);
+        }
+        let bytes = postcard::to_stdvec(&g).unwrap();
+        let back: TiledGrid = postcard::from_bytes(&bytes).unwrap();
+        assert_eq!(back.tile_count(), g.tile_count());
+        for x in -45..45 {
+            for y in 0..5 {
+                assert_eq!(back.get((x, y)), g.get((x, y)), "({x}, {y})");
+            }
+        }
+        assert_eq!(back.cell_of(0.3, 0.3), g.cell_of(0.3, 0.3));
+        let wire = || GridWire::from(g.clone());
+        let refused = |w: GridWire| TiledGrid::try_from(w).unwrap_err();
+        assert!(refused(GridWire { resolution: 0.0, ..wire() }).contains("resolution"));
+        assert!(refused(GridWire { origin: (Real::NAN, 0.0), ..wire() }).contains("origin"));
+        assert!(refused(GridWire { wall_threshold: 2.0, ..wire() }).contains("threshold"));
+        assert!(refused(GridWire { tiles_wide: wire().tiles_wide + 1, ..wire() }).contains("holds"));
+        assert!(refused(GridWire { tiles_wide: usize::MAX, tiles_high: 2, ..wire() }).contains("holds"));
+        let mut flipped = wire();
+        let tile = flipped.tiles.iter_mut().flatten().next().unwrap();
+        Arc::make_mut(tile).walls[3] ^= 1;
+        assert!(refused(flipped).contains("bits disagree"));
+        let mut poisoned = wire();
+        let tile = poisoned.tiles.iter_mut().flatten().find(|t| t.cells.iter().any(|c| c.hits > 0)).unwrap();
+        let cell = Arc::make_mut(tile).cells.iter_mut().find(|c| c.hits > 0).unwrap();
+        cell.mean_x = f32::INFINITY;
+        assert!(refused(poisoned).contains("not finite"));
+        // Damaged bytes: an error or a valid grid, never a panic.
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..500 {
+            let mut bad = bytes.clone();
+            let i = rng.random_range(0..bad.len());
+            bad[i] = rng.random();
+            if let Ok(grid) = postcard::from_bytes::<TiledGrid>(&bad) {
+                let _ = grid.get((0, 3));
+            }
+        }
+    }
 
     #[test]
     fn cells_anywhere_grow_the_grid() {
