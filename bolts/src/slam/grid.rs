@@ -10,7 +10,7 @@
 //! indexings, with no hashing and no atomic operation.
 
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use crate::geometry::{LineStepper, Real};
 
@@ -69,7 +69,7 @@ impl Cell {
 /// A square block of cells, with one bit per cell saying whether it is a
 /// wall and one saying whether it is free, so the scan matcher finds the
 /// few candidate cells of a beam with bit operations before reading any.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(into = "TileWire", try_from = "TileWire")]
 pub struct Tile {
     cells: Box<[Cell; TILE_SIDE * TILE_SIDE]>,
@@ -77,6 +77,14 @@ pub struct Tile {
     walls: [u32; TILE_SIDE],
     /// Bit x of `free[y]`: cell (x, y) is free (see [`Cell::is_free`]).
     free: [u32; TILE_SIDE],
+    /// The cells' digest once computed; every write clears it.
+    digest: OnceLock<u128>,
+}
+
+impl PartialEq for Tile {
+    fn eq(&self, other: &Self) -> bool {
+        self.cells == other.cells && self.walls == other.walls && self.free == other.free
+    }
 }
 
 impl Default for Tile {
@@ -85,6 +93,7 @@ impl Default for Tile {
             cells: Box::new([Cell::default(); TILE_SIDE * TILE_SIDE]),
             walls: [0; TILE_SIDE],
             free: [u32::MAX; TILE_SIDE],
+            digest: OnceLock::new(),
         }
     }
 }
@@ -118,11 +127,27 @@ impl TryFrom<TileWire> for Tile {
             let n = v.len();
             v.try_into().map_err(|_| format!("a tile has {TILE_SIDE} bit rows, got {n}"))
         };
-        Ok(Tile { cells, walls: rows(w.walls)?, free: rows(w.free)? })
+        Ok(Tile { cells, walls: rows(w.walls)?, free: rows(w.free)?, digest: OnceLock::new() })
     }
 }
 
 impl Tile {
+    /// A 128-bit digest of the cells (XXH3, the same in every process):
+    /// the tile's address in transfers, so a receiver that holds a tile
+    /// with this digest is not sent it again. Computed once per content.
+    pub fn digest(&self) -> u128 {
+        *self.digest.get_or_init(|| {
+            let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+            for c in self.cells.iter() {
+                hasher.update(&c.mean_x.to_le_bytes());
+                hasher.update(&c.mean_y.to_le_bytes());
+                hasher.update(&c.hits.to_le_bytes());
+                hasher.update(&c.visits.to_le_bytes());
+            }
+            hasher.digest128()
+        })
+    }
+
     /// Changes cell (`x`, `y`) of the tile with `f` and keeps its bits.
     #[inline]
     fn update(&mut self, x: usize, y: usize, threshold: Real, f: impl FnOnce(&mut Cell)) {
@@ -188,14 +213,14 @@ pub struct TiledGrid {
 /// A grid as it travels: everything but the derived per-metre factor and
 /// the clone counter.
 #[derive(Serialize, Deserialize)]
-struct GridWire {
-    resolution: Real,
-    origin: (Real, Real),
-    tile_min: (i64, i64),
-    tiles_wide: usize,
-    tiles_high: usize,
-    tiles: Vec<Option<Arc<Tile>>>,
-    wall_threshold: Real,
+pub(crate) struct GridWire {
+    pub(crate) resolution: Real,
+    pub(crate) origin: (Real, Real),
+    pub(crate) tile_min: (i64, i64),
+    pub(crate) tiles_wide: usize,
+    pub(crate) tiles_high: usize,
+    pub(crate) tiles: Vec<Option<Arc<Tile>>>,
+    pub(crate) wall_threshold: Real,
 }
 
 impl From<TiledGrid> for GridWire {
@@ -375,7 +400,10 @@ impl TiledGrid {
         if Arc::strong_count(entry) > 1 {
             self.clones += 1;
         }
-        Arc::make_mut(entry)
+        let tile = Arc::make_mut(entry);
+        // Every write goes through here: the content is about to change.
+        tile.digest.take();
+        tile
     }
 
     /// Changes cell `c` with `f`: its tile is created, or cloned if another

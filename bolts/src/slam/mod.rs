@@ -1,7 +1,7 @@
 //! RBPF SLAM, GMapping-style (Grisetti, Stachniss, Burgard 2007): the pure
-//! algorithm parts. Work in progress: the map, motion model, scan matcher,
-//! resampling and the serial filter are here; the topology, the CLI and the
-//! accuracy and speed work follow.
+//! algorithm parts: the tiled map, the motion model, the scan matcher, the
+//! particle model, a serial filter, and map transfers between processes.
+//! The topology kinds are in `pf_topology`.
 
 pub mod filter;
 pub mod grid;
@@ -10,3 +10,4 @@ pub mod matcher;
 pub mod model;
 pub mod motion;
 pub mod options;
+pub mod transfer;

@@ -1,0 +1,224 @@
+//! Moving maps between processes without resending what the receiver
+//! holds: tiles are addressed by their content's digest, the sender
+//! remembers which digests each receiver has, and a packed map carries
+//! only the tiles the receiver lacks, referring to the rest. Particles
+//! resampled from one parent share most of their tiles, and a map sent
+//! again after a reading differs only in the tiles the reading touched.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::Real;
+use crate::slam::grid::{GridWire, Tile, TiledGrid};
+
+/// A tile in a packed map.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum PackedTile {
+    /// No tile here.
+    Empty,
+    /// A tile the receiver holds, by digest.
+    Held(u128),
+    /// A tile sent whole.
+    Whole(Arc<Tile>),
+}
+
+/// A map as sent to one receiver.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PackedGrid {
+    resolution: Real,
+    origin: (Real, Real),
+    tile_min: (i64, i64),
+    tiles_wide: usize,
+    tiles_high: usize,
+    wall_threshold: Real,
+    tiles: Vec<PackedTile>,
+}
+
+impl PackedGrid {
+    /// Tiles sent whole.
+    pub fn whole_tiles(&self) -> usize {
+        self.tiles.iter().filter(|t| matches!(t, PackedTile::Whole(_))).count()
+    }
+
+    /// Tiles sent by reference.
+    pub fn held_tiles(&self) -> usize {
+        self.tiles.iter().filter(|t| matches!(t, PackedTile::Held(_))).count()
+    }
+}
+
+/// Why a packed map could not be unpacked.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum UnpackError {
+    /// It refers to a tile this store does not hold (evicted, or the
+    /// sender's record is wrong): ask for the map again, whole.
+    #[error("the map refers to tile {0:032x}, which is not held here")]
+    MissingTile(u128),
+    /// The map is damaged.
+    #[error("damaged map: {0}")]
+    Invalid(String),
+}
+
+/// What the sender knows each receiver holds.
+#[derive(Debug, Default)]
+pub struct Sent {
+    held: HashSet<u128>,
+}
+
+impl Sent {
+    /// Forgets everything (the receiver restarted or lost its store).
+    pub fn forget(&mut self) {
+        self.held.clear();
+    }
+}
+
+/// Packs `grid` for the receiver that `sent` describes, and records the
+/// tiles sent whole as held there.
+pub fn pack(grid: &TiledGrid, sent: &mut Sent) -> PackedGrid {
+    let wire = GridWire::from(grid.clone());
+    let tiles = wire
+        .tiles
+        .into_iter()
+        .map(|tile| match tile {
+            None => PackedTile::Empty,
+            Some(tile) => {
+                let digest = tile.digest();
+                if sent.held.insert(digest) { PackedTile::Whole(tile) } else { PackedTile::Held(digest) }
+            }
+        })
+        .collect();
+    PackedGrid {
+        resolution: wire.resolution,
+        origin: wire.origin,
+        tile_min: wire.tile_min,
+        tiles_wide: wire.tiles_wide,
+        tiles_high: wire.tiles_high,
+        wall_threshold: wire.wall_threshold,
+        tiles,
+    }
+}
+
+/// The tiles a receiver holds, by digest: shared by every map it unpacks.
+#[derive(Debug, Default)]
+pub struct TileStore {
+    tiles: HashMap<u128, Arc<Tile>>,
+}
+
+impl TileStore {
+    /// Tiles held.
+    pub fn len(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// Whether nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    /// Unpacks a map, keeping the tiles that came whole. The map is
+    /// checked as any map read from bytes is.
+    pub fn unpack(&mut self, packed: PackedGrid) -> Result<TiledGrid, UnpackError> {
+        let mut tiles = Vec::with_capacity(packed.tiles.len());
+        for tile in packed.tiles {
+            tiles.push(match tile {
+                PackedTile::Empty => None,
+                PackedTile::Held(digest) => {
+                    Some(self.tiles.get(&digest).cloned().ok_or(UnpackError::MissingTile(digest))?)
+                }
+                PackedTile::Whole(tile) => Some(self.tiles.entry(tile.digest()).or_insert(tile).clone()),
+            });
+        }
+        let wire = GridWire {
+            resolution: packed.resolution,
+            origin: packed.origin,
+            tile_min: packed.tile_min,
+            tiles_wide: packed.tiles_wide,
+            tiles_high: packed.tiles_high,
+            tiles,
+            wall_threshold: packed.wall_threshold,
+        };
+        TiledGrid::try_from(wire).map_err(UnpackError::Invalid)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A corridor 8 m long mapped with a wall on each side.
+    fn corridor() -> TiledGrid {
+        let mut g = TiledGrid::new(0.05, (0.0, 0.0));
+        for x in 0..160 {
+            for y in [-20, 20] {
+                g.update((x, y), |c| c.add_hit(x as f32 * 0.05, y as f32 * 0.05));
+            }
+            for y in -19..20 {
+                g.update((x, y), |c| c.visits += 1);
+            }
+        }
+        g
+    }
+
+    fn same_cells(a: &TiledGrid, b: &TiledGrid) -> bool {
+        (-5..170).all(|x| (-25..25).all(|y| a.get((x, y)) == b.get((x, y))))
+    }
+
+    fn bytes(p: &PackedGrid) -> usize {
+        postcard::to_stdvec(p).unwrap().len()
+    }
+
+    #[test]
+    fn a_map_sent_again_carries_only_the_tiles_that_changed() {
+        let (mut sent, mut store) = (Sent::default(), TileStore::default());
+        let mut map = corridor();
+        let first = pack(&map, &mut sent);
+        let tiles = first.whole_tiles();
+        assert!(tiles >= 10, "{tiles} tiles");
+        let first_bytes = bytes(&first);
+        let received = store.unpack(first).unwrap();
+        assert!(same_cells(&received, &map));
+        // A reading touches one tile; a copy (a resampled sibling) shares all.
+        map.update((3, 3), |c| c.add_hit(0.15, 0.15));
+        let sibling = map.clone();
+        let second = pack(&map, &mut sent);
+        assert_eq!((second.whole_tiles(), second.held_tiles()), (1, tiles - 1));
+        let third = pack(&sibling, &mut sent);
+        assert_eq!((third.whole_tiles(), third.held_tiles()), (0, tiles));
+        assert!(bytes(&second) * 5 < first_bytes, "{} vs {first_bytes} bytes", bytes(&second));
+        eprintln!(
+            "{tiles} tiles: {first_bytes} bytes whole, {} after one tile changed, {} for a sibling",
+            bytes(&second),
+            bytes(&third)
+        );
+        let (again, sibling_again) = (store.unpack(second).unwrap(), store.unpack(third).unwrap());
+        assert!(same_cells(&again, &map) && same_cells(&sibling_again, &sibling));
+        assert_eq!(store.len(), tiles + 1);
+    }
+
+    #[test]
+    fn a_write_changes_the_digest_and_unknown_references_are_refused() {
+        let mut map = corridor();
+        let mut sent = Sent::default();
+        let before = pack(&map, &mut sent);
+        map.update((3, 3), |c| c.visits += 1);
+        let after = pack(&map, &mut sent);
+        assert_eq!(after.whole_tiles(), 1, "the written tile has a new digest");
+        // A receiver that never got the first map cannot resolve the second.
+        let mut fresh = TileStore::default();
+        assert!(matches!(fresh.unpack(after), Err(UnpackError::MissingTile(_))));
+        // A damaged whole tile is refused like any damaged map.
+        let mut damaged = before;
+        let tile = damaged.tiles.iter_mut().find_map(|t| match t {
+            PackedTile::Whole(t) => Some(t),
+            _ => None,
+        });
+        let mut broken: Tile = postcard::from_bytes(&postcard::to_stdvec(&**tile.unwrap()).unwrap()).unwrap();
+        let mut wire: serde_json::Value = serde_json::to_value(&broken).unwrap();
+        wire["walls"][0] = serde_json::json!(u32::MAX);
+        broken = serde_json::from_value(wire).unwrap();
+        *damaged.tiles.iter_mut().find(|t| matches!(t, PackedTile::Whole(_))).unwrap() =
+            PackedTile::Whole(Arc::new(broken));
+        assert!(matches!(TileStore::default().unpack(damaged), Err(UnpackError::Invalid(_))));
+    }
+}
