@@ -90,9 +90,90 @@ impl<'a> Cdr<'a> {
     }
 }
 
+/// Writes one little-endian CDR (XCDR1) message: the encapsulation header,
+/// then primitives aligned to their size relative to the data after it, as
+/// ROS 2 middlewares expect.
+#[derive(Debug)]
+pub(crate) struct CdrWriter {
+    bytes: Vec<u8>,
+}
+
+/// The encapsulation header: CDR, little endian, no options.
+const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+
+impl CdrWriter {
+    pub(crate) fn new() -> Self {
+        CdrWriter { bytes: CDR_LE.to_vec() }
+    }
+
+    fn align(&mut self, to: usize) {
+        let data = self.bytes.len() - CDR_LE.len();
+        self.bytes.resize(self.bytes.len() + (data.div_ceil(to) * to - data), 0);
+    }
+
+    pub(crate) fn u32(&mut self, v: u32) {
+        self.align(4);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    pub(crate) fn i32(&mut self, v: i32) {
+        self.align(4);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    pub(crate) fn f32(&mut self, v: f32) {
+        self.align(4);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    pub(crate) fn f64(&mut self, v: f64) {
+        self.align(8);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    /// A string: u32 length including the terminating NUL, the bytes, NUL.
+    pub(crate) fn string(&mut self, s: &str) {
+        self.u32(s.len() as u32 + 1);
+        self.bytes.extend_from_slice(s.as_bytes());
+        self.bytes.push(0);
+    }
+
+    /// A sequence of bytes (`int8[]`, `uint8[]`): u32 length, the bytes.
+    pub(crate) fn byte_seq(&mut self, v: impl ExactSizeIterator<Item = u8>) {
+        self.u32(v.len() as u32);
+        self.bytes.extend(v);
+    }
+
+    pub(crate) fn finish(self) -> Vec<u8> {
+        self.bytes
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_writer_aligns_as_the_reader_expects() {
+        let mut w = CdrWriter::new();
+        w.u32(7);
+        w.string("ab");
+        w.f64(1.5);
+        w.byte_seq([1u8, 2, 3].into_iter());
+        w.f32(-2.0);
+        let bytes = w.finish();
+        // Same layout as the reader's test: pad to 8 after "ab\0".
+        assert_eq!(&bytes[..4], &CDR_LE);
+        assert_eq!(bytes.len(), 4 + 4 + 4 + 3 + 5 + 8 + 4 + 3 + 1 + 4);
+        let mut c = Cdr::new(&bytes).unwrap();
+        assert_eq!(c.u32("a").unwrap(), 7);
+        assert_eq!(c.string("s").unwrap(), "ab");
+        assert_eq!(c.f64("x").unwrap(), 1.5);
+        let n = c.seq_len(1, "seq").unwrap();
+        assert_eq!(n, 3);
+        assert_eq!(c.take(3, 1, "seq").unwrap(), &[1, 2, 3]);
+        assert_eq!(c.f32("y").unwrap(), -2.0);
+    }
 
     #[test]
     fn aligns_relative_to_the_payload_and_checks_bounds() {

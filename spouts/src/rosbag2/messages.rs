@@ -1,10 +1,11 @@
 //! The ROS 2 messages squall reads, decoded from CDR:
 //! `sensor_msgs/msg/LaserScan`, `nav_msgs/msg/Odometry`,
-//! `tf2_msgs/msg/TFMessage`.
+//! `tf2_msgs/msg/TFMessage`; and those it sends back to a robot, encoded:
+//! `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/OccupancyGrid`.
 
 use squall_bolts::geometry::Pose2;
 
-use super::cdr::{Cdr, CdrResult};
+use super::cdr::{Cdr, CdrResult, CdrWriter};
 
 /// `std_msgs/Header`: stamp (s) and frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -120,4 +121,150 @@ pub fn tf_message(bytes: &[u8]) -> CdrResult<Vec<Transform>> {
             Ok(Transform { header, child_frame_id, pose })
         })
         .collect()
+}
+
+fn write_header(w: &mut CdrWriter, stamp: f64, frame_id: &str) {
+    let sec = stamp.floor();
+    // Stamps outside i32 seconds (year 2038 on) saturate.
+    w.i32(sec.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32);
+    w.u32((((stamp - sec) * 1e9).round() as u32).min(999_999_999));
+    w.string(frame_id);
+}
+
+/// A planar pose as a 3-D position (z = 0) and a yaw quaternion.
+fn write_pose(w: &mut CdrWriter, pose: &Pose2) {
+    let (s, c) = (pose.theta * 0.5).sin_cos();
+    for v in [pose.x, pose.y, 0.0, 0.0, 0.0, s, c] {
+        w.f64(v);
+    }
+}
+
+/// Encodes a `geometry_msgs/msg/PoseStamped` (a robot's estimated pose).
+pub fn pose_stamped(stamp: f64, frame_id: &str, pose: &Pose2) -> Vec<u8> {
+    let mut w = CdrWriter::new();
+    write_header(&mut w, stamp, frame_id);
+    write_pose(&mut w, pose);
+    w.finish()
+}
+
+/// A map to send as `nav_msgs/msg/OccupancyGrid`: row-major cells from
+/// the origin's corner, each −1 (unknown) or 0–100 (occupancy, %).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancyGridMsg {
+    /// Stamp, seconds.
+    pub stamp: f64,
+    /// The map's frame.
+    pub frame_id: String,
+    /// Metres per cell.
+    pub resolution: f32,
+    /// Cells per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// The pose of cell (0, 0)'s corner.
+    pub origin: Pose2,
+    /// `width × height` cells.
+    pub data: Vec<i8>,
+}
+
+/// Encodes a `nav_msgs/msg/OccupancyGrid`; `None` if `data` does not hold
+/// `width × height` cells.
+pub fn occupancy_grid(map: &OccupancyGridMsg) -> Option<Vec<u8>> {
+    if map.data.len() != map.width as usize * map.height as usize {
+        return None;
+    }
+    let mut w = CdrWriter::new();
+    write_header(&mut w, map.stamp, &map.frame_id);
+    // info: map_load_time, resolution, width, height, origin.
+    write_header_stamp_only(&mut w, map.stamp);
+    w.f32(map.resolution);
+    w.u32(map.width);
+    w.u32(map.height);
+    write_pose(&mut w, &map.origin);
+    w.byte_seq(map.data.iter().map(|&v| v as u8));
+    Some(w.finish())
+}
+
+fn write_header_stamp_only(w: &mut CdrWriter, stamp: f64) {
+    let sec = stamp.floor();
+    w.i32(sec.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32);
+    w.u32((((stamp - sec) * 1e9).round() as u32).min(999_999_999));
+}
+
+#[cfg(test)]
+mod encode_tests {
+    use super::*;
+
+    #[test]
+    fn a_pose_stamped_has_ros_2s_layout() {
+        let bytes = pose_stamped(12.25, "map", &Pose2::new(1.0, -2.0, std::f64::consts::FRAC_PI_2));
+        // header: sec, nanosec, "map\0" (len 4) = 16 bytes, already 8-aligned;
+        // then position (3 f64) and orientation (4 f64).
+        assert_eq!(bytes.len(), 4 + 16 + 56);
+        let mut c = Cdr::new(&bytes).unwrap();
+        assert_eq!(header(&mut c).unwrap(), Header { stamp: 12.25, frame_id: "map".into() });
+        let p = pose(&mut c, "pose").unwrap();
+        assert!((p.x - 1.0).abs() < 1e-12 && (p.y + 2.0).abs() < 1e-12);
+        assert!((p.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_occupancy_grid_has_ros_2s_layout() {
+        let map = OccupancyGridMsg {
+            stamp: 3.5,
+            frame_id: "map".into(),
+            resolution: 0.05,
+            width: 3,
+            height: 2,
+            origin: Pose2::new(-1.0, -0.5, 0.0),
+            data: vec![-1, 0, 100, 50, -1, 0],
+        };
+        let bytes = occupancy_grid(&map).unwrap();
+        let mut c = Cdr::new(&bytes).unwrap();
+        assert_eq!(header(&mut c).unwrap().frame_id, "map");
+        assert_eq!((c.i32("sec").unwrap(), c.u32("nsec").unwrap()), (3, 500_000_000));
+        assert_eq!(c.f32("resolution").unwrap(), 0.05);
+        assert_eq!((c.u32("w").unwrap(), c.u32("h").unwrap()), (3, 2));
+        assert_eq!(pose(&mut c, "origin").unwrap(), Pose2::new(-1.0, -0.5, 0.0));
+        let n = c.seq_len(1, "data").unwrap();
+        assert_eq!(n, 6);
+        // The cells are the last bytes: nothing follows them.
+        assert_eq!(&bytes[bytes.len() - 6..], &[255, 0, 100, 50, 255, 0]);
+        assert!(occupancy_grid(&OccupancyGridMsg { width: 4, ..map }).is_none());
+    }
+
+    /// Bytes from an independent implementation: the `rosbags` Python
+    /// package's `serialize_cdr` (ROS 2 Humble types) for the same values.
+    fn golden(hex: &str) -> Vec<u8> {
+        (0..hex.len()).step_by(2).map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap()).collect()
+    }
+
+    #[test]
+    fn the_encodings_match_an_independent_implementation() {
+        let pose = pose_stamped(12.25, "map", &Pose2::new(1.0, -2.0, std::f64::consts::FRAC_PI_2));
+        assert_eq!(
+            pose,
+            golden(
+                "000100000c00000080b2e60e040000006d617000000000000000f03f00000000000000c00000000000000000\
+                 00000000000000000000000000000000cc3b7f669ea0e63fcd3b7f669ea0e63f"
+            )
+        );
+        let map = OccupancyGridMsg {
+            stamp: 3.5,
+            frame_id: "map".into(),
+            resolution: 0.05,
+            width: 3,
+            height: 2,
+            origin: Pose2::new(-1.0, -0.5, 0.0),
+            data: vec![-1, 0, 100, 50, -1, 0],
+        };
+        assert_eq!(
+            occupancy_grid(&map).unwrap(),
+            golden(
+                "00010000030000000065cd1d040000006d617000030000000065cd1dcdcc4c3d030000000200000000000000\
+                 000000000000f0bf000000000000e0bf000000000000000000000000000000000000000000000000000000000\
+                 0000000000000000000f03f06000000ff006432ff00"
+            )
+        );
+    }
 }
