@@ -3,6 +3,8 @@
 mod eval;
 mod localize;
 mod progress;
+#[cfg(feature = "cluster")]
+mod robot;
 mod run;
 mod sim;
 mod slam;
@@ -103,6 +105,9 @@ enum Command {
     /// Host tasks for a cluster's coordinator (cluster mode).
     #[cfg(feature = "cluster")]
     Worker(worker::WorkerArgs),
+    /// Play a log as a robot over the live link; report the round trip.
+    #[cfg(feature = "cluster")]
+    Robot(robot::RobotArgs),
 }
 
 /// Parses arguments, runs the command, maps errors to exit codes.
@@ -147,6 +152,8 @@ pub(crate) fn main() -> ExitCode {
         Command::Localize(args) => localize::localize(&args),
         #[cfg(feature = "cluster")]
         Command::Worker(args) => worker::worker(&args),
+        #[cfg(feature = "cluster")]
+        Command::Robot(args) => robot::robot(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
             println!("spouts:");

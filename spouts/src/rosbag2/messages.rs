@@ -4,6 +4,7 @@
 //! `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/OccupancyGrid`.
 
 use squall_bolts::geometry::Pose2;
+use squall_bolts::sensor::LaserReading;
 
 use super::cdr::{Cdr, CdrResult, CdrWriter};
 
@@ -147,6 +148,13 @@ pub fn pose_stamped(stamp: f64, frame_id: &str, pose: &Pose2) -> Vec<u8> {
     w.finish()
 }
 
+/// Decodes a `geometry_msgs/msg/PoseStamped` (planar part).
+pub fn read_pose_stamped(bytes: &[u8]) -> CdrResult<(Header, Pose2)> {
+    let mut c = Cdr::new(bytes)?;
+    let header = header(&mut c)?;
+    Ok((header, pose(&mut c, "pose")?))
+}
+
 /// A map to send as `nav_msgs/msg/OccupancyGrid`: row-major cells from
 /// the origin's corner, each −1 (unknown) or 0–100 (occupancy, %).
 #[derive(Debug, Clone, PartialEq)]
@@ -191,13 +199,70 @@ fn write_header_stamp_only(w: &mut CdrWriter, stamp: f64) {
     w.u32((((stamp - sec) * 1e9).round() as u32).min(999_999_999));
 }
 
+/// Encodes a `sensor_msgs/msg/LaserScan` as a ROS 2 driver would publish
+/// it (no intensities; angle_max from the beam count).
+pub fn laser_scan_cdr(scan: &LaserReading, frame_id: &str) -> Vec<u8> {
+    let mut w = CdrWriter::new();
+    write_header(&mut w, scan.stamp, frame_id);
+    let last = scan.ranges.len().saturating_sub(1) as f64;
+    w.f32(scan.angle_min as f32);
+    w.f32((scan.angle_min + last * scan.angle_increment) as f32);
+    w.f32(scan.angle_increment as f32);
+    w.f32(0.0);
+    w.f32(0.0);
+    w.f32(scan.range_min as f32);
+    w.f32(scan.range_max as f32);
+    w.u32(scan.ranges.len() as u32);
+    for &r in &scan.ranges {
+        w.f32(r);
+    }
+    w.u32(0);
+    w.finish()
+}
+
+/// Encodes a `nav_msgs/msg/Odometry` with the planar pose (covariances and
+/// velocities zero).
+pub fn odometry_cdr(stamp: f64, frame_id: &str, child_frame_id: &str, pose: &Pose2) -> Vec<u8> {
+    let mut w = CdrWriter::new();
+    write_header(&mut w, stamp, frame_id);
+    w.string(child_frame_id);
+    write_pose(&mut w, pose);
+    for _ in 0..36 + 6 + 36 {
+        w.f64(0.0);
+    }
+    w.finish()
+}
+
 #[cfg(test)]
 mod encode_tests {
     use super::*;
 
     #[test]
+    fn scans_and_odometry_read_back_as_written() {
+        let scan = LaserReading {
+            stamp: 7.5,
+            ranges: vec![1.0, 2.5, 80.0],
+            angle_min: -1.5,
+            angle_increment: 1.5,
+            range_min: 0.1,
+            range_max: 80.0,
+            odometry: Pose2::IDENTITY,
+            laser_offset: Pose2::IDENTITY,
+        };
+        let back = laser_scan(&laser_scan_cdr(&scan, "laser")).unwrap();
+        assert_eq!(back.header, Header { stamp: 7.5, frame_id: "laser".into() });
+        assert_eq!((back.angle_min, back.angle_increment, back.range_max), (-1.5, 1.5, 80.0));
+        assert_eq!(back.ranges, scan.ranges);
+        let odom = odometry(&odometry_cdr(7.25, "odom", "base_link", &Pose2::new(1.0, 2.0, -0.5))).unwrap();
+        assert_eq!(odom.header.stamp, 7.25);
+        assert!((odom.pose.x - 1.0).abs() < 1e-12 && (odom.pose.theta + 0.5).abs() < 1e-12);
+    }
+
+    #[test]
     fn a_pose_stamped_has_ros_2s_layout() {
         let bytes = pose_stamped(12.25, "map", &Pose2::new(1.0, -2.0, std::f64::consts::FRAC_PI_2));
+        let (h, p) = read_pose_stamped(&bytes).unwrap();
+        assert_eq!((h.stamp, p.x), (12.25, 1.0));
         // header: sec, nanosec, "map\0" (len 4) = 16 bytes, already 8-aligned;
         // then position (3 f64) and orientation (4 f64).
         assert_eq!(bytes.len(), 4 + 16 + 56);

@@ -6,3 +6,7 @@
 pub mod config;
 pub mod session;
 pub mod wire;
+
+/// The zenoh this build uses, for components that talk to it directly
+/// (the live robot link).
+pub use zenoh;

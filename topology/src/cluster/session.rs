@@ -44,7 +44,8 @@ pub struct SessionOptions {
     pub tls: Option<TlsSpec>,
 }
 
-/// Opens a session: peer mode, only the given endpoints, no scouting.
+/// Opens a session: peer mode, only the given endpoints, no multicast
+/// scouting.
 pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
     let mut config = zenoh::Config::default();
     let list = |endpoints: &[Endpoint]| {
@@ -55,8 +56,9 @@ pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
     set("mode", "\"peer\"".into())?;
     set("listen/endpoints", list(&options.listen))?;
     set("connect/endpoints", list(&options.connect))?;
+    // No multicast discovery: peers are the endpoints given. Gossip only
+    // runs over links already made (and zenoh warns without it).
     set("scouting/multicast/enabled", "false".into())?;
-    set("scouting/gossip/enabled", "false".into())?;
     if let Some(tls) = &options.tls {
         let path = |p: &std::path::Path| format!("{:?}", p.display().to_string());
         set("transport/link/tls/root_ca_certificate", path(&tls.root_ca))?;
@@ -67,6 +69,27 @@ pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
         set("transport/link/tls/enable_mtls", "true".into())?;
     }
     zenoh::open(config).await.map_err(zenoh_error)
+}
+
+/// The session of this process for `options`, opened on first use: the
+/// components of one process that name the same endpoints (a live link's
+/// ingest spout and publisher bolt) share one session, so a robot that
+/// connects to it reaches both.
+pub async fn shared(options: &SessionOptions) -> Result<Session, SessionError> {
+    static SESSIONS: tokio::sync::Mutex<Vec<(String, Session)>> = tokio::sync::Mutex::const_new(Vec::new());
+    let key = format!("{:?} {:?} {:?}", options.listen, options.connect, options.tls);
+    let mut sessions = SESSIONS.lock().await;
+    if let Some((_, session)) = sessions.iter().find(|(k, s)| k == &key && !s.is_closed()) {
+        return Ok(session.clone());
+    }
+    let session = open(options).await?;
+    sessions.push((key, session.clone()));
+    Ok(session)
+}
+
+/// Parses endpoint strings (component parameters, command-line flags).
+pub fn endpoints(texts: &[String]) -> Result<Vec<Endpoint>, String> {
+    texts.iter().map(|t| Endpoint::parse(t)).collect()
 }
 
 /// The key part naming a worker: its listen endpoint, made key-safe.

@@ -1,0 +1,296 @@
+//! The live robot link (feature `cluster`; seed 003's gateway without a
+//! broker): `live.ingest` subscribes to a robot's scans and odometry over
+//! zenoh and emits readings on `scan`; `live.publish` sends the estimated
+//! poses back. Both speak ROS 2's CDR (`sensor_msgs/LaserScan`,
+//! `nav_msgs/Odometry` in, `geometry_msgs/PoseStamped` out, as published
+//! over rmw_zenoh) or squall's own postcard messages (`format =
+//! "squall"`: a `LaserReading` with its odometry in, `PoseStamped` out).
+//! Components of one process that name the same endpoints share one
+//! session, so a robot that connects to it reaches both.
+
+use std::time::Duration;
+
+use serde::Deserialize;
+use squall_bolts::geometry::Pose2;
+use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
+use squall_topology::cluster::zenoh;
+use squall_topology::{
+    Bolt, BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext, Tuple,
+};
+
+use crate::rosbag2::messages;
+use crate::rosbag2::{MAX_EXTRAPOLATION, interpolate};
+
+/// How messages are encoded on the link.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Format {
+    /// ROS 2 CDR, as rmw_zenoh carries it.
+    #[default]
+    Cdr,
+    /// squall's postcard messages.
+    Squall,
+}
+
+/// The default keys, as a ROS 2 robot over rmw_zenoh would name its topics
+/// (without the domain and type parts).
+pub const SCAN_KEY: &str = "robot/scan";
+/// Odometry's default key.
+pub const ODOM_KEY: &str = "robot/odom";
+/// The estimated poses' default key.
+pub const POSE_KEY: &str = "robot/pose";
+
+fn scan_key() -> String {
+    SCAN_KEY.into()
+}
+fn odom_key() -> String {
+    ODOM_KEY.into()
+}
+fn pose_key() -> String {
+    POSE_KEY.into()
+}
+fn map_frame() -> String {
+    "map".into()
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IngestParams {
+    #[serde(default)]
+    listen: Vec<String>,
+    #[serde(default)]
+    connect: Vec<String>,
+    #[serde(default)]
+    format: Format,
+    #[serde(default = "scan_key")]
+    scan_key: String,
+    #[serde(default = "odom_key")]
+    odom_key: String,
+    /// End the stream when nothing has arrived for this long.
+    idle_secs: Option<f64>,
+    /// The laser's pose on the robot (x, y, θ), for CDR scans.
+    #[serde(default)]
+    laser_offset: [f64; 3],
+}
+
+fn session_options(listen: &[String], connect: &[String]) -> Result<SessionOptions, ParamError> {
+    let listen = endpoints(listen).map_err(ParamError::new)?;
+    let connect = endpoints(connect).map_err(ParamError::new)?;
+    if listen.is_empty() && connect.is_empty() {
+        return Err(ParamError::new("expected `listen` or `connect` endpoints (tcp/HOST:PORT)"));
+    }
+    Ok(SessionOptions { listen, connect, tls: None })
+}
+
+type Subscriber = zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// `live.ingest`: a robot's scans (with odometry) from zenoh, on `scan`.
+/// Metrics: `scans_received`, `scans_without_odometry` (CDR scans outside
+/// the odometry received: dropped, counted), `malformed` (messages that did
+/// not decode: dropped, counted).
+#[derive(Debug)]
+pub struct LiveIngest {
+    options: SessionOptions,
+    format: Format,
+    keys: (String, String),
+    idle: Option<Duration>,
+    laser_offset: Pose2,
+    subscribers: Option<(Subscriber, Option<Subscriber>)>,
+    /// Odometry received, oldest first (about the last 10 s).
+    odometry: Vec<Odometry>,
+}
+
+impl LiveIngest {
+    /// Builds it from `params`.
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: IngestParams = p.parse()?;
+        let idle = match params.idle_secs {
+            Some(s) if !(s.is_finite() && s > 0.0) => {
+                return Err(ParamError::new("idle_secs: expected seconds > 0"));
+            }
+            s => s.map(Duration::from_secs_f64),
+        };
+        let [x, y, theta] = params.laser_offset;
+        Ok(LiveIngest {
+            options: session_options(&params.listen, &params.connect)?,
+            format: params.format,
+            keys: (params.scan_key, params.odom_key),
+            idle,
+            laser_offset: Pose2::new(x, y, theta),
+            subscribers: None,
+            odometry: Vec::new(),
+        })
+    }
+
+    /// The reading a CDR scan makes, with odometry interpolated at its
+    /// stamp; `None` if the odometry received does not cover it.
+    fn cdr_reading(&self, scan: messages::LaserScan) -> Option<LaserReading> {
+        let odometry = interpolate(&self.odometry, scan.header.stamp)?;
+        Some(LaserReading {
+            stamp: scan.header.stamp,
+            ranges: scan.ranges,
+            angle_min: f64::from(scan.angle_min),
+            angle_increment: f64::from(scan.angle_increment),
+            range_min: f64::from(scan.range_min),
+            range_max: f64::from(scan.range_max),
+            odometry,
+            laser_offset: self.laser_offset,
+        })
+    }
+
+    /// Keeps `o` if it is newer than the last, and about the last 10 s.
+    fn push_odometry(&mut self, o: Odometry) {
+        if self.odometry.last().is_some_and(|last| o.stamp <= last.stamp) {
+            return;
+        }
+        let old = self.odometry.partition_point(|first| o.stamp - first.stamp > 10.0 + MAX_EXTRAPOLATION);
+        // Drained in batches, so each entry is moved about once.
+        if old > 64 {
+            self.odometry.drain(..old);
+        }
+        self.odometry.push(o);
+    }
+}
+
+impl Spout for LiveIngest {
+    fn declare(&self, d: &mut Declarer) {
+        d.output::<LaserReading>("scan");
+    }
+
+    async fn open(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
+        let session = shared(&self.options).await?;
+        let scans = session.declare_subscriber(self.keys.0.clone()).await?;
+        let odometry = match self.format {
+            Format::Cdr => Some(session.declare_subscriber(self.keys.1.clone()).await?),
+            Format::Squall => None,
+        };
+        self.subscribers = Some((scans, odometry));
+        Ok(())
+    }
+
+    async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
+        loop {
+            let (scans, odometry) = self.subscribers.as_ref().ok_or("live.ingest: not opened")?;
+            let idle = async {
+                match self.idle {
+                    Some(d) => tokio::time::sleep(d).await,
+                    None => std::future::pending().await,
+                }
+            };
+            let odometry_sample = async {
+                match odometry {
+                    Some(s) => s.recv_async().await.ok(),
+                    None => std::future::pending().await,
+                }
+            };
+            // Odometry first: a robot sends the odometry for a scan before
+            // the scan, and the scan needs it.
+            tokio::select! {
+                biased;
+                sample = odometry_sample => {
+                    let Some(sample) = sample else { continue };
+                    match messages::odometry(&sample.payload().to_bytes()) {
+                        Ok(o) => self.push_odometry(Odometry {
+                            stamp: o.header.stamp,
+                            pose: o.pose,
+                            linear_velocity: o.linear_x,
+                            angular_velocity: o.angular_z,
+                        }),
+                        Err(_) => out.count("malformed", 1),
+                    }
+                }
+                sample = scans.recv_async() => {
+                    let Ok(sample) = sample else { return Ok(SpoutStatus::Done) };
+                    let bytes = sample.payload().to_bytes();
+                    out.count("scans_received", 1);
+                    let reading = match self.format {
+                        Format::Squall => postcard::from_bytes::<LaserReading>(&bytes).ok(),
+                        Format::Cdr => match messages::laser_scan(&bytes) {
+                            Ok(scan) => {
+                                let reading = self.cdr_reading(scan);
+                                if reading.is_none() {
+                                    out.count("scans_without_odometry", 1);
+                                    continue;
+                                }
+                                reading
+                            }
+                            Err(_) => None,
+                        },
+                    };
+                    match reading {
+                        Some(r) if r.ranges.len() >= 2 => {
+                            out.emit("scan", r).await?;
+                            return Ok(SpoutStatus::Continue);
+                        }
+                        _ => out.count("malformed", 1),
+                    }
+                }
+                () = idle => return Ok(SpoutStatus::Done),
+            }
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PublishParams {
+    #[serde(default)]
+    listen: Vec<String>,
+    #[serde(default)]
+    connect: Vec<String>,
+    #[serde(default)]
+    format: Format,
+    #[serde(default = "pose_key")]
+    pose_key: String,
+    #[serde(default = "map_frame")]
+    frame_id: String,
+}
+
+/// `live.publish`: every `PoseStamped` it receives goes to the robot on
+/// `pose_key`. Metric: `poses_sent`.
+#[derive(Debug)]
+pub struct LivePublish {
+    options: SessionOptions,
+    format: Format,
+    key: String,
+    frame_id: String,
+    session: Option<zenoh::Session>,
+}
+
+impl LivePublish {
+    /// Builds it from `params`.
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: PublishParams = p.parse()?;
+        Ok(LivePublish {
+            options: session_options(&params.listen, &params.connect)?,
+            format: params.format,
+            key: params.pose_key,
+            frame_id: params.frame_id,
+            session: None,
+        })
+    }
+}
+
+impl Bolt for LivePublish {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<PoseStamped>();
+    }
+
+    async fn prepare(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
+        self.session = Some(shared(&self.options).await?);
+        Ok(())
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let pose = input.get::<PoseStamped>().ok_or("live.publish takes PoseStamped")?;
+        let bytes = match self.format {
+            Format::Cdr => messages::pose_stamped(pose.stamp, &self.frame_id, &pose.pose),
+            Format::Squall => postcard::to_stdvec(pose)?,
+        };
+        let session = self.session.as_ref().ok_or("live.publish: not prepared")?;
+        session.put(self.key.clone(), bytes).await?;
+        out.count("poses_sent", 1);
+        Ok(())
+    }
+}

@@ -1,0 +1,185 @@
+//! `squall robot`: plays a log as a robot would over the live link (scans
+//! and odometry published in real time, or faster), takes the poses that
+//! come back, and reports the round trip (scan sent → its pose received)
+//! and the readings that got no pose (dropped by a live dispatcher, or
+//! lost).
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use squall_bolts::sensor::{LaserReading, PoseStamped};
+use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
+use squall_spouts::live::{Format, ODOM_KEY, POSE_KEY, SCAN_KEY};
+use squall_spouts::rosbag2::messages;
+use squall_topology::cluster::session::{SessionOptions, endpoints, open};
+use squall_topology::cluster::zenoh;
+
+use super::{EXIT_FAILED, EXIT_INVALID};
+
+#[derive(Debug, clap::Args)]
+pub(super) struct RobotArgs {
+    /// The log to play (CARMEN .clf or .clf.gz).
+    #[arg(long, value_name = "FILE")]
+    log: PathBuf,
+    /// The topology's live link endpoint (repeatable).
+    #[arg(long, value_name = "ENDPOINT", required = true)]
+    connect: Vec<String>,
+    /// `cdr` (ROS 2 messages, as over rmw_zenoh) or `squall`.
+    #[arg(long, default_value = "cdr", value_parser = ["cdr", "squall"])]
+    format: String,
+    /// Playback speed: 1 is the log's own pace.
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Play only the first N scans.
+    #[arg(long, value_name = "N")]
+    max_scans: Option<usize>,
+    /// How long to wait for the last poses after the last scan, seconds.
+    #[arg(long, default_value_t = 5.0)]
+    wait_secs: f64,
+    /// How long to wait for the link to come up, seconds.
+    #[arg(long, default_value_t = 20.0)]
+    connect_secs: f64,
+}
+
+/// A stamp as a key that survives CDR's seconds + nanoseconds.
+fn stamp_key(stamp: f64) -> i64 {
+    (stamp * 1e6).round() as i64
+}
+
+/// Runs `squall robot`.
+pub(super) fn robot(args: &RobotArgs) -> ExitCode {
+    let connect = match endpoints(&args.connect) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("squall robot: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        eprintln!("squall robot: --speed {}: expected a factor > 0", args.speed);
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let format = if args.format == "squall" { Format::Squall } else { Format::Cdr };
+    let records = match read_log(&args.log, ReadOptions::default()) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("squall robot: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let scans: Vec<LaserReading> = records
+        .into_iter()
+        .filter_map(|r| match r {
+            Record::Scan(Laser::Front, s) => Some(s),
+            _ => None,
+        })
+        .take(args.max_scans.unwrap_or(usize::MAX))
+        .collect();
+    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("squall robot: cannot start the runtime: {e}");
+            return ExitCode::from(EXIT_FAILED);
+        }
+    };
+    match runtime.block_on(play(
+        args,
+        SessionOptions { connect, ..SessionOptions::default() },
+        format,
+        &scans,
+    )) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("squall robot: {e}");
+            ExitCode::from(EXIT_FAILED)
+        }
+    }
+}
+
+async fn play(
+    args: &RobotArgs,
+    options: SessionOptions,
+    format: Format,
+    scans: &[LaserReading],
+) -> anyhow::Result<()> {
+    let session = open(&options).await?;
+    let deadline = Instant::now() + Duration::from_secs_f64(args.connect_secs);
+    while session.info().peers_zid().await.next().is_none() {
+        anyhow::ensure!(
+            Instant::now() < deadline,
+            "no link to {:?} after {} s",
+            args.connect,
+            args.connect_secs
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let poses = session.declare_subscriber(POSE_KEY).await.map_err(|e| anyhow::anyhow!("{e}"))?;
+    // Subscriptions propagate with the link; give them a moment.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut sent: HashMap<i64, Instant> = HashMap::new();
+    let mut latencies = Vec::new();
+    let mut malformed = 0u64;
+    let mut take = |sample: zenoh::sample::Sample, sent: &HashMap<i64, Instant>, latencies: &mut Vec<f64>| {
+        let bytes = sample.payload().to_bytes();
+        let stamp = match format {
+            Format::Cdr => messages::read_pose_stamped(&bytes).map(|(h, _)| h.stamp).ok(),
+            Format::Squall => postcard::from_bytes::<PoseStamped>(&bytes).map(|p| p.stamp).ok(),
+        };
+        match stamp.and_then(|s| sent.get(&stamp_key(s))) {
+            Some(at) => latencies.push(at.elapsed().as_secs_f64() * 1e3),
+            None => malformed += 1,
+        }
+    };
+    let started = Instant::now();
+    let first = scans.first().map_or(0.0, |s| s.stamp);
+    for scan in scans {
+        let due = started + Duration::from_secs_f64(((scan.stamp - first) / args.speed).max(0.0));
+        loop {
+            let wait = due.saturating_duration_since(Instant::now());
+            if wait.is_zero() {
+                break;
+            }
+            if let Ok(Ok(sample)) = tokio::time::timeout(wait, poses.recv_async()).await {
+                take(sample, &sent, &mut latencies);
+            }
+        }
+        sent.insert(stamp_key(scan.stamp), Instant::now());
+        let put = |key: &'static str, bytes: Vec<u8>| session.put(key, bytes);
+        match format {
+            Format::Cdr => {
+                put(ODOM_KEY, messages::odometry_cdr(scan.stamp, "odom", "base_link", &scan.odometry))
+                    .await
+                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+                put(SCAN_KEY, messages::laser_scan_cdr(scan, "laser"))
+                    .await
+                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+            }
+            Format::Squall => {
+                put(SCAN_KEY, postcard::to_stdvec(scan)?).await.map_err(|e| anyhow::anyhow!("{e}"))?;
+            }
+        }
+    }
+    let end = Instant::now() + Duration::from_secs_f64(args.wait_secs);
+    while latencies.len() < scans.len() {
+        let wait = end.saturating_duration_since(Instant::now());
+        match tokio::time::timeout(wait, poses.recv_async()).await {
+            Ok(Ok(sample)) => take(sample, &sent, &mut latencies),
+            _ => break,
+        }
+    }
+    let _ = session.close().await;
+    let answered = latencies.len();
+    latencies.sort_by(f64::total_cmp);
+    let at =
+        |q: f64| latencies.get(((answered as f64 - 1.0) * q).round() as usize).copied().unwrap_or(f64::NAN);
+    println!("scans sent: {}", scans.len());
+    println!("poses received: {answered}");
+    println!("readings without a pose: {}", scans.len() - answered.min(scans.len()));
+    println!("round trip ms: p50 {:.1}, p90 {:.1}, max {:.1}", at(0.5), at(0.9), at(1.0));
+    if malformed > 0 {
+        println!("poses not matching a scan sent: {malformed}");
+    }
+    Ok(())
+}

@@ -1,0 +1,87 @@
+//! The live robot link end to end: `squall run` on the live SLAM topology
+//! and `squall robot` playing ACES scans to it over zenoh on loopback,
+//! in ROS 2 CDR and in squall's own format. Poses come back for the
+//! scans, the round trip is reported, and the run writes its map.
+#![cfg(feature = "cluster")]
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+fn aces() -> std::path::PathBuf {
+    let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.clf");
+    assert!(log.exists(), "missing {}: this test plays the shared data's ACES log", log.display());
+    log
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// Runs the topology and the robot; returns the robot's report and the
+/// run's metrics.
+fn round_trip(format: &str, scans: usize) -> (String, serde_json::Value) {
+    let port = free_port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let listen = format!("[\"{endpoint}\"]");
+    let out = tempfile::tempdir().unwrap();
+    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
+    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .arg("run")
+        .arg(&topology)
+        .args(["--set", &format!("source.params.listen={listen}")])
+        .args(["--set", &format!("publish.params.listen={listen}")])
+        .args(["--set", &format!("source.params.format=\"{format}\"")])
+        .args(["--set", &format!("publish.params.format=\"{format}\"")])
+        .args(["--set", "source.params.idle_secs=3.0", "--quiet", "--out"])
+        .arg(out.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("squall run starts");
+    let robot = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["robot", "--log"])
+        .arg(aces())
+        .args(["--connect", &endpoint, "--format", format, "--speed", "5", "--wait-secs", "3"])
+        .args(["--max-scans", &scans.to_string()])
+        .output()
+        .expect("squall robot runs");
+    let ran = run.wait_with_output().unwrap();
+    let report = String::from_utf8_lossy(&robot.stdout).to_string();
+    assert!(robot.status.success(), "robot: {report}{}", String::from_utf8_lossy(&robot.stderr));
+    assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
+    assert!(out.path().join("map.pgm").exists() && out.path().join("trajectory.tum").exists());
+    let metrics = std::fs::read_to_string(out.path().join("metrics.json")).unwrap();
+    (report, serde_json::from_str(&metrics).unwrap())
+}
+
+fn number(report: &str, label: &str) -> usize {
+    let line =
+        report.lines().find(|l| l.starts_with(label)).unwrap_or_else(|| panic!("no {label:?} in {report}"));
+    line[label.len()..].trim().parse().unwrap_or_else(|_| panic!("{line}"))
+}
+
+fn custom(metrics: &serde_json::Value, component: &str, name: &str) -> u64 {
+    let c = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == component).unwrap();
+    c["custom"][name].as_u64().unwrap_or(0)
+}
+
+#[test]
+fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
+    for format in ["cdr", "squall"] {
+        let scans = 150;
+        let (report, metrics) = round_trip(format, scans);
+        assert_eq!(number(&report, "scans sent:"), scans, "{report}");
+        let poses = number(&report, "poses received:");
+        let without = number(&report, "readings without a pose:");
+        // Everything the source took got a pose, but for what the live
+        // dispatcher dropped (counted) while the matchers were busy.
+        let received = custom(&metrics, "source", "scans_received") as usize;
+        let dropped = custom(&metrics, "dispatcher", "dropped_readings") as usize;
+        assert_eq!(received, scans, "{format}: {report}");
+        assert_eq!(poses + dropped, scans, "{format}: {report} (dropped {dropped})");
+        assert_eq!(without, dropped, "{format}: {report}");
+        assert!(poses * 10 >= scans * 9, "{format}: only {poses} poses: {report}");
+        assert!(report.contains("round trip ms: p50"), "{report}");
+        eprintln!("{format}: {}", report.replace('\n', "; "));
+    }
+}
