@@ -1,7 +1,8 @@
 //! The live robot link end to end: `squall run` on the live SLAM topology
 //! and `squall robot` playing ACES scans to it over zenoh on loopback,
 //! in ROS 2 CDR and in squall's own format. Poses come back for the
-//! scans, the round trip is reported, and the run writes its map.
+//! scans, the map comes back while the robot drives, the round trip is
+//! reported, and the run writes its map.
 #![cfg(feature = "cluster")]
 
 use std::path::Path;
@@ -32,7 +33,8 @@ fn round_trip(format: &str, scans: usize) -> (String, serde_json::Value) {
         .args(["--set", &format!("publish.params.listen={listen}")])
         .args(["--set", &format!("source.params.format=\"{format}\"")])
         .args(["--set", &format!("publish.params.format=\"{format}\"")])
-        .args(["--set", "source.params.idle_secs=3.0", "--quiet", "--out"])
+        .args(["--set", "source.params.idle_secs=3.0", "--set", "matcher.params.map_interval=2"])
+        .args(["--quiet", "--out"])
         .arg(out.path())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -82,6 +84,11 @@ fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
         assert_eq!(without, dropped, "{format}: {report}");
         assert!(poses * 10 >= scans * 9, "{format}: only {poses} poses: {report}");
         assert!(report.contains("round trip ms: p50"), "{report}");
+        // The best particle's map came back while the robot was driving.
+        let maps = report.lines().find_map(|l| l.strip_prefix("maps received: ")).unwrap();
+        let count: usize = maps.split_whitespace().next().unwrap().parse().unwrap();
+        assert!(count >= 1, "{format}: {report}");
+        assert!(custom(&metrics, "publish", "maps_sent") as usize >= count, "{format}");
         eprintln!("{format}: {}", report.replace('\n', "; "));
     }
 }

@@ -1,10 +1,12 @@
 //! The live robot link (feature `cluster`; seed 003's gateway without a
 //! broker): `live.ingest` subscribes to a robot's scans and odometry over
 //! zenoh and emits readings on `scan`; `live.publish` sends the estimated
-//! poses back. Both speak ROS 2's CDR (`sensor_msgs/LaserScan`,
-//! `nav_msgs/Odometry` in, `geometry_msgs/PoseStamped` out, as published
+//! poses and, at an interval, the map back. Both speak ROS 2's CDR
+//! (`sensor_msgs/LaserScan`, `nav_msgs/Odometry` in,
+//! `geometry_msgs/PoseStamped`, `nav_msgs/OccupancyGrid` out, as published
 //! over rmw_zenoh) or squall's own postcard messages (`format =
-//! "squall"`: a `LaserReading` with its odometry in, `PoseStamped` out).
+//! "squall"`: a `LaserReading` with its odometry in, `PoseStamped` and
+//! `OccupancyGrid` out).
 //! Components of one process that name the same endpoints share one
 //! session, so a robot that connects to it reaches both.
 
@@ -12,6 +14,7 @@ use std::time::Duration;
 
 use serde::Deserialize;
 use squall_bolts::geometry::Pose2;
+use squall_bolts::map::OccupancyGrid;
 use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
 use squall_topology::cluster::zenoh;
@@ -53,6 +56,12 @@ fn pose_key() -> String {
 fn map_frame() -> String {
     "map".into()
 }
+fn map_key() -> String {
+    MAP_KEY.into()
+}
+
+/// The map's default key.
+pub const MAP_KEY: &str = "robot/map";
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -243,17 +252,26 @@ struct PublishParams {
     format: Format,
     #[serde(default = "pose_key")]
     pose_key: String,
+    #[serde(default = "map_key")]
+    map_key: String,
+    /// Send a map at most this often, seconds (0: every one received).
+    #[serde(default)]
+    map_interval_secs: f64,
     #[serde(default = "map_frame")]
     frame_id: String,
 }
 
 /// `live.publish`: every `PoseStamped` it receives goes to the robot on
-/// `pose_key`. Metric: `poses_sent`.
+/// `pose_key`; `OccupancyGrid`s (the best particle's map) on `map_key`, at
+/// most every `map_interval_secs`. Metrics: `poses_sent`, `maps_sent`,
+/// `map_bytes`.
 #[derive(Debug)]
 pub struct LivePublish {
     options: SessionOptions,
     format: Format,
-    key: String,
+    keys: (String, String),
+    map_interval: Duration,
+    last_map: Option<std::time::Instant>,
     frame_id: String,
     session: Option<zenoh::Session>,
 }
@@ -262,10 +280,15 @@ impl LivePublish {
     /// Builds it from `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: PublishParams = p.parse()?;
+        if !(params.map_interval_secs.is_finite() && params.map_interval_secs >= 0.0) {
+            return Err(ParamError::new("map_interval_secs: expected seconds ≥ 0"));
+        }
         Ok(LivePublish {
             options: session_options(&params.listen, &params.connect)?,
             format: params.format,
-            key: params.pose_key,
+            keys: (params.pose_key, params.map_key),
+            map_interval: Duration::from_secs_f64(params.map_interval_secs),
+            last_map: None,
             frame_id: params.frame_id,
             session: None,
         })
@@ -274,7 +297,7 @@ impl LivePublish {
 
 impl Bolt for LivePublish {
     fn declare(&self, d: &mut Declarer) {
-        d.input::<PoseStamped>();
+        d.input::<PoseStamped>().input::<OccupancyGrid>();
     }
 
     async fn prepare(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
@@ -283,14 +306,40 @@ impl Bolt for LivePublish {
     }
 
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
-        let pose = input.get::<PoseStamped>().ok_or("live.publish takes PoseStamped")?;
-        let bytes = match self.format {
-            Format::Cdr => messages::pose_stamped(pose.stamp, &self.frame_id, &pose.pose),
-            Format::Squall => postcard::to_stdvec(pose)?,
-        };
         let session = self.session.as_ref().ok_or("live.publish: not prepared")?;
-        session.put(self.key.clone(), bytes).await?;
-        out.count("poses_sent", 1);
+        if let Some(pose) = input.get::<PoseStamped>() {
+            let bytes = match self.format {
+                Format::Cdr => messages::pose_stamped(pose.stamp, &self.frame_id, &pose.pose),
+                Format::Squall => postcard::to_stdvec(pose)?,
+            };
+            session.put(self.keys.0.clone(), bytes).await?;
+            out.count("poses_sent", 1);
+            return Ok(());
+        }
+        let map = input.get::<OccupancyGrid>().ok_or("live.publish takes PoseStamped and OccupancyGrid")?;
+        if self.last_map.is_some_and(|at| at.elapsed() < self.map_interval) {
+            return Ok(());
+        }
+        self.last_map = Some(std::time::Instant::now());
+        let bytes = match self.format {
+            Format::Cdr => messages::occupancy_grid(&messages::OccupancyGridMsg {
+                // The map has no stamp of its own: the time it is sent.
+                stamp: std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0.0, |d| d.as_secs_f64()),
+                frame_id: self.frame_id.clone(),
+                resolution: map.resolution as f32,
+                width: u32::try_from(map.width)?,
+                height: u32::try_from(map.height)?,
+                origin: Pose2::new(map.origin.0, map.origin.1, 0.0),
+                data: map.cells.clone(),
+            })
+            .ok_or("live.publish: a map whose cells do not fill width × height")?,
+            Format::Squall => postcard::to_stdvec(map)?,
+        };
+        out.count("map_bytes", bytes.len() as u64);
+        session.put(self.keys.1.clone(), bytes).await?;
+        out.count("maps_sent", 1);
         Ok(())
     }
 }

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use squall_bolts::sensor::{LaserReading, PoseStamped};
 use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
-use squall_spouts::live::{Format, ODOM_KEY, POSE_KEY, SCAN_KEY};
+use squall_spouts::live::{Format, MAP_KEY, ODOM_KEY, POSE_KEY, SCAN_KEY};
 use squall_spouts::rosbag2::messages;
 use squall_topology::cluster::session::{SessionOptions, endpoints, open};
 use squall_topology::cluster::zenoh;
@@ -116,6 +116,7 @@ async fn play(
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     let poses = session.declare_subscriber(POSE_KEY).await.map_err(|e| anyhow::anyhow!("{e}"))?;
+    let maps = session.declare_subscriber(MAP_KEY).await.map_err(|e| anyhow::anyhow!("{e}"))?;
     // Subscriptions propagate with the link; give them a moment.
     tokio::time::sleep(Duration::from_millis(300)).await;
     let mut sent: HashMap<i64, Instant> = HashMap::new();
@@ -169,6 +170,11 @@ async fn play(
             _ => break,
         }
     }
+    let (mut map_count, mut map_bytes) = (0, 0);
+    while let Ok(Some(map)) = maps.try_recv() {
+        map_count += 1;
+        map_bytes = map.payload().len();
+    }
     let _ = session.close().await;
     let answered = latencies.len();
     latencies.sort_by(f64::total_cmp);
@@ -178,6 +184,7 @@ async fn play(
     println!("poses received: {answered}");
     println!("readings without a pose: {}", scans.len() - answered.min(scans.len()));
     println!("round trip ms: p50 {:.1}, p90 {:.1}, max {:.1}", at(0.5), at(0.9), at(1.0));
+    println!("maps received: {map_count} (the last {map_bytes} bytes)");
     if malformed > 0 {
         println!("poses not matching a scan sent: {malformed}");
     }
