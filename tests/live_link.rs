@@ -92,3 +92,52 @@ fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
         eprintln!("{format}: {}", report.replace('\n', "; "));
     }
 }
+
+#[test]
+fn an_independent_ros_2_client_gets_poses_back() {
+    // The client: the eclipse-zenoh Python package, CDR encoded with
+    // Python's struct (`.ci/run` installs the package).
+    let check = Command::new("python3").args(["-c", "import zenoh"]).output();
+    assert!(
+        check.as_ref().is_ok_and(|o| o.status.success()),
+        "this test needs python3 with the eclipse-zenoh package (pip install eclipse-zenoh==1.10.2)"
+    );
+    let port = free_port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let listen = format!("[\"{endpoint}\"]");
+    let out = tempfile::tempdir().unwrap();
+    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
+    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .arg("run")
+        .arg(&topology)
+        .args(["--set", &format!("source.params.listen={listen}")])
+        .args(["--set", &format!("publish.params.listen={listen}")])
+        .args(["--set", "source.params.idle_secs=3.0", "--quiet", "--out"])
+        .arg(out.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("squall run starts");
+    let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/cdr_robot.py");
+    let robot = Command::new("python3")
+        .arg(client)
+        .args(["--connect", &endpoint, "--scans", "60"])
+        .output()
+        .expect("the Python client runs");
+    let ran = run.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&robot.stdout);
+    assert!(robot.status.success(), "client: {stdout}{}", String::from_utf8_lossy(&robot.stderr));
+    assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
+    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    let poses = report["poses_received"].as_u64().unwrap();
+    let dropped = custom(&metrics, "dispatcher", "dropped_readings");
+    assert_eq!(custom(&metrics, "source", "scans_received"), 60, "{report}");
+    assert_eq!(poses + dropped, 60, "{report}");
+    assert!(poses >= 54, "{report}");
+    // The robot drove 2.95 m along the corridor's axis.
+    let last = report["last_pose"].as_array().unwrap();
+    let (x, y) = (last[1].as_f64().unwrap(), last[2].as_f64().unwrap());
+    assert!((x - 2.95).abs() < 0.1 && y.abs() < 0.05, "{report}");
+}
