@@ -3,73 +3,17 @@
 //! publish or read. Certificates are made for the test with `openssl`.
 #![cfg(feature = "cluster")]
 
-use std::path::Path;
-use std::process::Command;
+mod common;
+
 use std::time::Duration;
+
+use common::certs::{authority, tls};
 
 use squall::topology::cluster::config::{Endpoint, Protocol, TlsSpec};
 use squall::topology::cluster::session::{
     SessionError, SessionOptions, WorkerPresence, control_key, open, ping, reply_key,
 };
 use squall::topology::cluster::wire::{Control, Frame};
-
-fn openssl(dir: &Path, args: &[&str]) {
-    let out = Command::new("openssl")
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("this test needs the openssl command (Debian package openssl)");
-    assert!(out.status.success(), "openssl {args:?}: {}", String::from_utf8_lossy(&out.stderr));
-}
-
-/// A certificate authority named `ca` and, signed by it, certificates for
-/// each of `names` (valid for 127.0.0.1 and localhost).
-fn authority(dir: &Path, ca: &str, names: &[&str]) {
-    let ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"];
-    let (key, pem) = (format!("{ca}.key"), format!("{ca}.pem"));
-    let mut args = vec!["req", "-x509"];
-    args.extend(ec);
-    args.extend(["-keyout", &key, "-out", &pem, "-days", "2", "-subj", "/CN=squall test CA"]);
-    openssl(dir, &args);
-    std::fs::write(dir.join("san.cnf"), "subjectAltName=IP:127.0.0.1,DNS:localhost\n").unwrap();
-    for name in names {
-        let (k, csr, cert) = (format!("{name}.key"), format!("{name}.csr"), format!("{name}.pem"));
-        let subject = format!("/CN={name}");
-        let mut args = vec!["req"];
-        args.extend(ec);
-        args.extend(["-keyout", &k, "-out", &csr, "-subj", &subject]);
-        openssl(dir, &args);
-        openssl(
-            dir,
-            &[
-                "x509",
-                "-req",
-                "-in",
-                &csr,
-                "-CA",
-                &pem,
-                "-CAkey",
-                &key,
-                "-CAcreateserial",
-                "-out",
-                &cert,
-                "-days",
-                "2",
-            ]
-            .into_iter()
-            .chain(["-extfile", "san.cnf"])
-            .collect::<Vec<_>>(),
-        );
-    }
-}
-
-fn tls(dir: &Path, ca: &str, name: &str) -> TlsSpec {
-    TlsSpec {
-        root_ca: dir.join(format!("{ca}.pem")),
-        certificate: dir.join(format!("{name}.pem")),
-        private_key: dir.join(format!("{name}.key")),
-    }
-}
 
 fn free_endpoint() -> Endpoint {
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();

@@ -5,6 +5,8 @@
 //! reported, and the run writes its map.
 #![cfg(feature = "cluster")]
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Stdio};
 
@@ -140,4 +142,72 @@ fn an_independent_ros_2_client_gets_poses_back() {
     let last = report["last_pose"].as_array().unwrap();
     let (x, y) = (last[1].as_f64().unwrap(), last[2].as_f64().unwrap());
     assert!((x - 2.95).abs() < 0.1 && y.abs() < 0.05, "{report}");
+}
+
+#[test]
+fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
+    let certs = tempfile::tempdir().unwrap();
+    common::certs::authority(certs.path(), "ca", &["squall", "robot"]);
+    common::certs::authority(certs.path(), "rogue_ca", &["rogue"]);
+    let file = |name: &str| certs.path().join(name).display().to_string();
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let listen = format!("[\"{endpoint}\"]");
+    let tls = format!(
+        "{{ root_ca = {:?}, certificate = {:?}, private_key = {:?} }}",
+        file("ca.pem"),
+        file("squall.pem"),
+        file("squall.key")
+    );
+    let out = tempfile::tempdir().unwrap();
+    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
+    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .arg("run")
+        .arg(&topology)
+        .args([
+            "--set",
+            &format!("source.params.listen={listen}"),
+            "--set",
+            &format!("source.params.tls={tls}"),
+        ])
+        .args([
+            "--set",
+            &format!("publish.params.listen={listen}"),
+            "--set",
+            &format!("publish.params.tls={tls}"),
+        ])
+        .args(["--set", "source.params.idle_secs=4.0", "--quiet", "--out"])
+        .arg(out.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("squall run starts");
+    let robot = |name: &str, ca: &str, scans: &str| {
+        Command::new(env!("CARGO_BIN_EXE_squall"))
+            .args(["robot", "--log"])
+            .arg(aces())
+            .args(["--connect", &endpoint, "--max-scans", scans, "--speed", "5", "--connect-secs", "3"])
+            .args(["--tls-ca", &file(&format!("{ca}.pem"))])
+            .args(["--tls-cert", &file(&format!("{name}.pem")), "--tls-key", &file(&format!("{name}.key"))])
+            .output()
+            .unwrap()
+    };
+    // A rogue that trusts the cluster's authority but holds another's
+    // certificate gets no link.
+    let rogue = robot("rogue", "ca", "20");
+    assert_eq!(rogue.status.code(), Some(1), "{}", String::from_utf8_lossy(&rogue.stdout));
+    assert!(
+        String::from_utf8_lossy(&rogue.stderr).contains("no link"),
+        "{}",
+        String::from_utf8_lossy(&rogue.stderr)
+    );
+    let member = robot("robot", "ca", "60");
+    let report = String::from_utf8_lossy(&member.stdout).to_string();
+    assert!(member.status.success(), "{report}{}", String::from_utf8_lossy(&member.stderr));
+    let ran = run.wait_with_output().unwrap();
+    assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    // Only the member's scans reached the topology, and it got poses back.
+    assert_eq!(custom(&metrics, "source", "scans_received"), 60, "{report}");
+    assert!(number(&report, "poses received:") >= 54, "{report}");
 }

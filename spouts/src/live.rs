@@ -10,12 +10,14 @@
 //! Components of one process that name the same endpoints share one
 //! session, so a robot that connects to it reaches both.
 
+use std::path::PathBuf;
 use std::time::Duration;
 
 use serde::Deserialize;
 use squall_bolts::geometry::Pose2;
 use squall_bolts::map::OccupancyGrid;
 use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_topology::cluster::config::{Protocol, TlsSpec};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
 use squall_topology::cluster::zenoh;
 use squall_topology::{
@@ -76,6 +78,7 @@ struct IngestParams {
     scan_key: String,
     #[serde(default = "odom_key")]
     odom_key: String,
+    tls: Option<TlsParams>,
     /// End the stream when nothing has arrived for this long.
     idle_secs: Option<f64>,
     /// The laser's pose on the robot (x, y, θ), for CDR scans.
@@ -83,13 +86,43 @@ struct IngestParams {
     laser_offset: [f64; 3],
 }
 
-fn session_options(listen: &[String], connect: &[String]) -> Result<SessionOptions, ParamError> {
+/// Mutual TLS for the link: the robot's certificate must chain to
+/// `root_ca`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TlsParams {
+    root_ca: PathBuf,
+    certificate: PathBuf,
+    private_key: PathBuf,
+}
+
+fn session_options(
+    listen: &[String],
+    connect: &[String],
+    tls: Option<TlsParams>,
+) -> Result<SessionOptions, ParamError> {
     let listen = endpoints(listen).map_err(ParamError::new)?;
     let connect = endpoints(connect).map_err(ParamError::new)?;
     if listen.is_empty() && connect.is_empty() {
         return Err(ParamError::new("expected `listen` or `connect` endpoints (tcp/HOST:PORT)"));
     }
-    Ok(SessionOptions { listen, connect, tls: None })
+    let tls = match tls {
+        None => None,
+        Some(t) => {
+            for file in [&t.root_ca, &t.certificate, &t.private_key] {
+                if !file.is_file() {
+                    return Err(ParamError::new(format!("tls: no such file: {}", file.display())));
+                }
+            }
+            Some(TlsSpec { root_ca: t.root_ca, certificate: t.certificate, private_key: t.private_key })
+        }
+    };
+    let wanted = if tls.is_some() { Protocol::Tls } else { Protocol::Tcp };
+    if let Some(e) = listen.iter().chain(&connect).find(|e| e.protocol != wanted) {
+        let why = if tls.is_some() { "with `tls`, endpoints are tls/" } else { "tls/ endpoints need `tls`" };
+        return Err(ParamError::new(format!("{e}: {why}")));
+    }
+    Ok(SessionOptions { listen, connect, tls })
 }
 
 type Subscriber = zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
@@ -122,7 +155,7 @@ impl LiveIngest {
         };
         let [x, y, theta] = params.laser_offset;
         Ok(LiveIngest {
-            options: session_options(&params.listen, &params.connect)?,
+            options: session_options(&params.listen, &params.connect, params.tls)?,
             format: params.format,
             keys: (params.scan_key, params.odom_key),
             idle,
@@ -259,6 +292,7 @@ struct PublishParams {
     map_interval_secs: f64,
     #[serde(default = "map_frame")]
     frame_id: String,
+    tls: Option<TlsParams>,
 }
 
 /// `live.publish`: every `PoseStamped` it receives goes to the robot on
@@ -284,7 +318,7 @@ impl LivePublish {
             return Err(ParamError::new("map_interval_secs: expected seconds ≥ 0"));
         }
         Ok(LivePublish {
-            options: session_options(&params.listen, &params.connect)?,
+            options: session_options(&params.listen, &params.connect, params.tls)?,
             format: params.format,
             keys: (params.pose_key, params.map_key),
             map_interval: Duration::from_secs_f64(params.map_interval_secs),

@@ -10,6 +10,8 @@ mod sim;
 mod slam;
 mod speedup;
 #[cfg(feature = "cluster")]
+mod tls;
+#[cfg(feature = "cluster")]
 mod worker;
 
 use std::path::PathBuf;

@@ -16,6 +16,7 @@ use squall_spouts::rosbag2::messages;
 use squall_topology::cluster::session::{SessionOptions, endpoints, open};
 use squall_topology::cluster::zenoh;
 
+use super::tls::TlsArgs;
 use super::{EXIT_FAILED, EXIT_INVALID};
 
 #[derive(Debug, clap::Args)]
@@ -41,6 +42,8 @@ pub(super) struct RobotArgs {
     /// How long to wait for the link to come up, seconds.
     #[arg(long, default_value_t = 20.0)]
     connect_secs: f64,
+    #[command(flatten)]
+    tls: TlsArgs,
 }
 
 /// A stamp as a key that survives CDR's seconds + nanoseconds.
@@ -52,6 +55,13 @@ fn stamp_key(stamp: f64) -> i64 {
 pub(super) fn robot(args: &RobotArgs) -> ExitCode {
     let connect = match endpoints(&args.connect) {
         Ok(c) => c,
+        Err(e) => {
+            eprintln!("squall robot: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let tls = match args.tls.spec(&connect) {
+        Ok(t) => t,
         Err(e) => {
             eprintln!("squall robot: {e}");
             return ExitCode::from(EXIT_INVALID);
@@ -84,12 +94,7 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
             return ExitCode::from(EXIT_FAILED);
         }
     };
-    match runtime.block_on(play(
-        args,
-        SessionOptions { connect, ..SessionOptions::default() },
-        format,
-        &scans,
-    )) {
+    match runtime.block_on(play(args, SessionOptions { connect, listen: Vec::new(), tls }, format, &scans)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("squall robot: {e}");

@@ -2,12 +2,12 @@
 //! It listens on an explicit endpoint, announces itself with a liveliness
 //! token, and answers the coordinator until told to stop (or killed).
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
-use squall_topology::cluster::config::{Endpoint, Protocol, TlsSpec};
+use squall_topology::cluster::config::Endpoint;
 use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, worker_key};
 
+use super::tls::TlsArgs;
 use super::{EXIT_FAILED, EXIT_INVALID};
 
 #[derive(Debug, clap::Args)]
@@ -18,16 +18,8 @@ pub(super) struct WorkerArgs {
     /// Other processes to connect to (repeatable).
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
-    /// Mutual TLS: the cluster's certificate authority (with --tls-cert
-    /// and --tls-key; endpoints are then tls/).
-    #[arg(long, value_name = "FILE", requires_all = ["tls_cert", "tls_key"])]
-    tls_ca: Option<PathBuf>,
-    /// This worker's certificate, signed by the authority.
-    #[arg(long, value_name = "FILE", requires_all = ["tls_ca", "tls_key"])]
-    tls_cert: Option<PathBuf>,
-    /// This worker's private key.
-    #[arg(long, value_name = "FILE", requires_all = ["tls_ca", "tls_cert"])]
-    tls_key: Option<PathBuf>,
+    #[command(flatten)]
+    tls: TlsArgs,
 }
 
 /// Runs `squall worker`.
@@ -37,28 +29,13 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
     let Ok(connect) = args.connect.iter().map(|c| parse(c)).collect::<Result<Vec<_>, _>>() else {
         return ExitCode::from(EXIT_INVALID);
     };
-    let tls = match (&args.tls_ca, &args.tls_cert, &args.tls_key) {
-        (Some(ca), Some(cert), Some(key)) => {
-            for file in [ca, cert, key] {
-                if !file.is_file() {
-                    eprintln!("squall worker: no such file: {}", file.display());
-                    return ExitCode::from(EXIT_INVALID);
-                }
-            }
-            Some(TlsSpec { root_ca: ca.clone(), certificate: cert.clone(), private_key: key.clone() })
+    let tls = match args.tls.spec(std::iter::once(&listen).chain(&connect)) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("squall worker: {e}");
+            return ExitCode::from(EXIT_INVALID);
         }
-        _ => None,
     };
-    let wanted = if tls.is_some() { Protocol::Tls } else { Protocol::Tcp };
-    if let Some(e) = std::iter::once(&listen).chain(&connect).find(|e| e.protocol != wanted) {
-        let why = if tls.is_some() {
-            "with --tls-ca, endpoints are tls/"
-        } else {
-            "tls/ needs --tls-ca, --tls-cert and --tls-key"
-        };
-        eprintln!("squall worker: {e}: {why}");
-        return ExitCode::from(EXIT_INVALID);
-    }
     let options = SessionOptions { listen: vec![listen.clone()], connect, tls };
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,

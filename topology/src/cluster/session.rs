@@ -59,6 +59,9 @@ pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
     // No multicast discovery: peers are the endpoints given. Gossip only
     // runs over links already made (and zenoh warns without it).
     set("scouting/multicast/enabled", "false".into())?;
+    // A message larger than a frame may be is dropped by the transport
+    // before it is reassembled (zenoh's default allows 1 GiB).
+    set("transport/link/rx/max_message_size", DEFAULT_MAX_FRAME.to_string())?;
     if let Some(tls) = &options.tls {
         let path = |p: &std::path::Path| format!("{:?}", p.display().to_string());
         set("transport/link/tls/root_ca_certificate", path(&tls.root_ca))?;
