@@ -16,16 +16,23 @@ fn free_endpoint() -> Endpoint {
     Endpoint { protocol: Protocol::Tcp, host: "127.0.0.1".into(), port }
 }
 
-#[test]
-fn a_killed_worker_is_seen_to_go() {
+/// A `squall worker` process on a free loopback port, and a runtime for
+/// the test's coordinator.
+fn worker(stderr: Stdio) -> (Endpoint, std::process::Child, tokio::runtime::Runtime) {
     let endpoint = free_endpoint();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_squall"))
+    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
         .args(["worker", "--listen", &endpoint.to_string()])
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(stderr)
         .spawn()
         .expect("squall worker starts");
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().unwrap();
+    (endpoint, child, runtime)
+}
+
+#[test]
+fn a_killed_worker_is_seen_to_go() {
+    let (endpoint, mut child, runtime) = worker(Stdio::null());
     let outcome = runtime.block_on(async {
         let options = SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() };
         let coordinator = open(&options).await.unwrap();
@@ -65,14 +72,7 @@ fn a_worker_with_a_bad_endpoint_says_what_was_expected() {
 
 #[test]
 fn a_worker_does_not_outlive_its_coordinator() {
-    let endpoint = free_endpoint();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .args(["worker", "--listen", &endpoint.to_string()])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("squall worker starts");
-    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().unwrap();
+    let (endpoint, mut child, runtime) = worker(Stdio::piped());
     runtime.block_on(async {
         let options = SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() };
         let coordinator = open(&options).await.unwrap();

@@ -20,6 +20,24 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
+/// `squall run` on the live SLAM topology, both link components on
+/// `listen`, with more `--set`s, writing to `out`.
+fn start_live(listen: &str, sets: &[String], out: &Path) -> std::process::Child {
+    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_squall"));
+    run.arg("run").arg(&topology);
+    let links = [format!("source.params.listen={listen}"), format!("publish.params.listen={listen}")];
+    for set in links.iter().chain(sets) {
+        run.args(["--set", set]);
+    }
+    run.args(["--quiet", "--out"])
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("squall run starts")
+}
+
 /// Runs the topology and the robot; returns the robot's report and the
 /// run's metrics.
 fn round_trip(format: &str, scans: usize) -> (String, serde_json::Value) {
@@ -27,21 +45,13 @@ fn round_trip(format: &str, scans: usize) -> (String, serde_json::Value) {
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let listen = format!("[\"{endpoint}\"]");
     let out = tempfile::tempdir().unwrap();
-    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
-    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .arg("run")
-        .arg(&topology)
-        .args(["--set", &format!("source.params.listen={listen}")])
-        .args(["--set", &format!("publish.params.listen={listen}")])
-        .args(["--set", &format!("source.params.format=\"{format}\"")])
-        .args(["--set", &format!("publish.params.format=\"{format}\"")])
-        .args(["--set", "source.params.idle_secs=3.0", "--set", "matcher.params.map_interval=2"])
-        .args(["--quiet", "--out"])
-        .arg(out.path())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("squall run starts");
+    let sets = [
+        format!("source.params.format=\"{format}\""),
+        format!("publish.params.format=\"{format}\""),
+        "source.params.idle_secs=3.0".to_string(),
+        "matcher.params.map_interval=2".to_string(),
+    ];
+    let run = start_live(&listen, &sets, out.path());
     let robot = Command::new(env!("CARGO_BIN_EXE_squall"))
         .args(["robot", "--log"])
         .arg(aces())
@@ -108,18 +118,7 @@ fn an_independent_ros_2_client_gets_poses_back() {
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let listen = format!("[\"{endpoint}\"]");
     let out = tempfile::tempdir().unwrap();
-    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
-    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .arg("run")
-        .arg(&topology)
-        .args(["--set", &format!("source.params.listen={listen}")])
-        .args(["--set", &format!("publish.params.listen={listen}")])
-        .args(["--set", "source.params.idle_secs=3.0", "--quiet", "--out"])
-        .arg(out.path())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("squall run starts");
+    let run = start_live(&listen, &["source.params.idle_secs=3.0".to_string()], out.path());
     let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/cdr_robot.py");
     let robot = Command::new("python3")
         .arg(client)
@@ -159,28 +158,12 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
         file("squall.key")
     );
     let out = tempfile::tempdir().unwrap();
-    let topology = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies/live_slam.toml");
-    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .arg("run")
-        .arg(&topology)
-        .args([
-            "--set",
-            &format!("source.params.listen={listen}"),
-            "--set",
-            &format!("source.params.tls={tls}"),
-        ])
-        .args([
-            "--set",
-            &format!("publish.params.listen={listen}"),
-            "--set",
-            &format!("publish.params.tls={tls}"),
-        ])
-        .args(["--set", "source.params.idle_secs=4.0", "--quiet", "--out"])
-        .arg(out.path())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("squall run starts");
+    let sets = [
+        format!("source.params.tls={tls}"),
+        format!("publish.params.tls={tls}"),
+        "source.params.idle_secs=4.0".to_string(),
+    ];
+    let run = start_live(&listen, &sets, out.path());
     let robot = |name: &str, ca: &str, scans: &str| {
         Command::new(env!("CARGO_BIN_EXE_squall"))
             .args(["robot", "--log"])

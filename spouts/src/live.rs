@@ -169,16 +169,7 @@ impl LiveIngest {
     /// stamp; `None` if the odometry received does not cover it.
     fn cdr_reading(&self, scan: messages::LaserScan) -> Option<LaserReading> {
         let odometry = interpolate(&self.odometry, scan.header.stamp)?;
-        Some(LaserReading {
-            stamp: scan.header.stamp,
-            ranges: scan.ranges,
-            angle_min: f64::from(scan.angle_min),
-            angle_increment: f64::from(scan.angle_increment),
-            range_min: f64::from(scan.range_min),
-            range_max: f64::from(scan.range_max),
-            odometry,
-            laser_offset: self.laser_offset,
-        })
+        Some(scan.into_reading(odometry, self.laser_offset))
     }
 
     /// Keeps `o` if it is newer than the last, and about the last 10 s.

@@ -110,20 +110,23 @@ async fn play(
     scans: &[LaserReading],
 ) -> anyhow::Result<()> {
     let session = open(&options).await?;
+    let zenoh_error = |e: zenoh::Error| anyhow::anyhow!("{e}");
+    let poses = session.declare_subscriber(POSE_KEY).await.map_err(zenoh_error)?;
+    let maps = session.declare_subscriber(MAP_KEY).await.map_err(zenoh_error)?;
+    let scan_publisher = session.declare_publisher(SCAN_KEY).await.map_err(zenoh_error)?;
+    let odom_publisher = session.declare_publisher(ODOM_KEY).await.map_err(zenoh_error)?;
+    // Drive only once the topology subscribes to the scans: what is
+    // published before that reaches nobody.
     let deadline = Instant::now() + Duration::from_secs_f64(args.connect_secs);
-    while session.info().peers_zid().await.next().is_none() {
+    while !scan_publisher.matching_status().await.map_err(zenoh_error)?.matching() {
         anyhow::ensure!(
             Instant::now() < deadline,
-            "no link to {:?} after {} s",
+            "no link to a topology taking scans at {:?} after {} s",
             args.connect,
             args.connect_secs
         );
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    let poses = session.declare_subscriber(POSE_KEY).await.map_err(|e| anyhow::anyhow!("{e}"))?;
-    let maps = session.declare_subscriber(MAP_KEY).await.map_err(|e| anyhow::anyhow!("{e}"))?;
-    // Subscriptions propagate with the link; give them a moment.
-    tokio::time::sleep(Duration::from_millis(300)).await;
     let mut sent: HashMap<i64, Instant> = HashMap::new();
     let mut latencies = Vec::new();
     let mut malformed = 0u64;
@@ -152,19 +155,13 @@ async fn play(
             }
         }
         sent.insert(stamp_key(scan.stamp), Instant::now());
-        let put = |key: &'static str, bytes: Vec<u8>| session.put(key, bytes);
         match format {
             Format::Cdr => {
-                put(ODOM_KEY, messages::odometry_cdr(scan.stamp, "odom", "base_link", &scan.odometry))
-                    .await
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
-                put(SCAN_KEY, messages::laser_scan_cdr(scan, "laser"))
-                    .await
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+                let odometry = messages::odometry_cdr(scan.stamp, "odom", "base_link", &scan.odometry);
+                odom_publisher.put(odometry).await.map_err(zenoh_error)?;
+                scan_publisher.put(messages::laser_scan_cdr(scan, "laser")).await.map_err(zenoh_error)?;
             }
-            Format::Squall => {
-                put(SCAN_KEY, postcard::to_stdvec(scan)?).await.map_err(|e| anyhow::anyhow!("{e}"))?;
-            }
+            Format::Squall => scan_publisher.put(postcard::to_stdvec(scan)?).await.map_err(zenoh_error)?,
         }
     }
     let end = Instant::now() + Duration::from_secs_f64(args.wait_secs);

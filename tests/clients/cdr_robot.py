@@ -107,19 +107,21 @@ def main():
     config.insert_json5("scouting/multicast/enabled", "false")
     poses = []
     with zenoh.open(config) as session:
-        deadline = time.time() + 20
-        while not list(session.info.peers_zid()):
-            if time.time() > deadline:
-                raise SystemExit("no link to " + args.connect)
-            time.sleep(0.05)
         session.declare_subscriber("robot/pose", lambda s: poses.append(read_pose_stamped(bytes(s.payload.to_bytes()))))
-        time.sleep(0.3)
+        scan_publisher = session.declare_publisher("robot/scan")
+        odom_publisher = session.declare_publisher("robot/odom")
+        # Drive once the topology subscribes to the scans.
+        deadline = time.time() + 20
+        while not scan_publisher.matching_status.matching:
+            if time.time() > deadline:
+                raise SystemExit("no link to a topology taking scans at " + args.connect)
+            time.sleep(0.02)
         t0 = 1000.0
         for k in range(args.scans):
             stamp = t0 + 0.1 * k
             x = 0.05 * k
-            session.put("robot/odom", odometry(stamp, x, 0.0, 0.0))
-            session.put("robot/scan", laser_scan(stamp, corridor_ranges(0.0), -math.pi / 2, math.pi / 180))
+            odom_publisher.put(odometry(stamp, x, 0.0, 0.0))
+            scan_publisher.put(laser_scan(stamp, corridor_ranges(0.0), -math.pi / 2, math.pi / 180))
             time.sleep(0.1)
         deadline = time.time() + 5
         while len(poses) < args.scans and time.time() < deadline:

@@ -180,16 +180,7 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
             .iter()
             .find(|t| t.child_frame_id == scan.header.frame_id)
             .map_or(Pose2::IDENTITY, |t| t.pose);
-        out.scans.push(LaserReading {
-            stamp: scan.header.stamp,
-            ranges: scan.ranges,
-            angle_min: f64::from(scan.angle_min),
-            angle_increment: f64::from(scan.angle_increment),
-            range_min: f64::from(scan.range_min),
-            range_max: f64::from(scan.range_max),
-            odometry: pose,
-            laser_offset,
-        });
+        out.scans.push(scan.into_reading(pose, laser_offset));
     }
     Ok(out)
 }

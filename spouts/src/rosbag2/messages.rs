@@ -55,6 +55,23 @@ pub struct LaserScan {
     pub ranges: Vec<f32>,
 }
 
+impl LaserScan {
+    /// The reading this scan makes, with the robot's `odometry` at its
+    /// stamp and the laser's pose on the robot.
+    pub fn into_reading(self, odometry: Pose2, laser_offset: Pose2) -> LaserReading {
+        LaserReading {
+            stamp: self.header.stamp,
+            ranges: self.ranges,
+            angle_min: f64::from(self.angle_min),
+            angle_increment: f64::from(self.angle_increment),
+            range_min: f64::from(self.range_min),
+            range_max: f64::from(self.range_max),
+            odometry,
+            laser_offset,
+        }
+    }
+}
+
 /// Decodes a `LaserScan`.
 pub fn laser_scan(bytes: &[u8]) -> CdrResult<LaserScan> {
     let mut c = Cdr::new(bytes)?;
@@ -237,6 +254,19 @@ pub fn odometry_cdr(stamp: f64, frame_id: &str, child_frame_id: &str, pose: &Pos
 mod encode_tests {
     use super::*;
 
+    /// A 3 × 2 map with every kind of cell.
+    fn small_map() -> OccupancyGridMsg {
+        OccupancyGridMsg {
+            stamp: 3.5,
+            frame_id: "map".into(),
+            resolution: 0.05,
+            width: 3,
+            height: 2,
+            origin: Pose2::new(-1.0, -0.5, 0.0),
+            data: vec![-1, 0, 100, 50, -1, 0],
+        }
+    }
+
     #[test]
     fn scans_and_odometry_read_back_as_written() {
         let scan = LaserReading {
@@ -275,15 +305,7 @@ mod encode_tests {
 
     #[test]
     fn an_occupancy_grid_has_ros_2s_layout() {
-        let map = OccupancyGridMsg {
-            stamp: 3.5,
-            frame_id: "map".into(),
-            resolution: 0.05,
-            width: 3,
-            height: 2,
-            origin: Pose2::new(-1.0, -0.5, 0.0),
-            data: vec![-1, 0, 100, 50, -1, 0],
-        };
+        let map = small_map();
         let bytes = occupancy_grid(&map).unwrap();
         let mut c = Cdr::new(&bytes).unwrap();
         assert_eq!(header(&mut c).unwrap().frame_id, "map");
@@ -314,15 +336,7 @@ mod encode_tests {
                  00000000000000000000000000000000cc3b7f669ea0e63fcd3b7f669ea0e63f"
             )
         );
-        let map = OccupancyGridMsg {
-            stamp: 3.5,
-            frame_id: "map".into(),
-            resolution: 0.05,
-            width: 3,
-            height: 2,
-            origin: Pose2::new(-1.0, -0.5, 0.0),
-            data: vec![-1, 0, 100, 50, -1, 0],
-        };
+        let map = small_map();
         assert_eq!(
             occupancy_grid(&map).unwrap(),
             golden(

@@ -303,15 +303,22 @@ mod tests {
         Endpoint { protocol: Protocol::Tcp, host: "127.0.0.1".into(), port }
     }
 
-    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn a_coordinator_sees_a_worker_come_answer_and_go() {
+    /// A worker on a free loopback port and a coordinator session connected
+    /// to it.
+    async fn worker_and_coordinator() -> (Endpoint, WorkerPresence, Session) {
         let endpoint = free_endpoint();
         let worker_options = SessionOptions { listen: vec![endpoint.clone()], ..SessionOptions::default() };
-        let mut worker = WorkerPresence::start(&worker_options).await.unwrap();
+        let worker = WorkerPresence::start(&worker_options).await.unwrap();
         let coordinator =
             open(&SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() })
                 .await
                 .unwrap();
+        (endpoint, worker, coordinator)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_coordinator_sees_a_worker_come_answer_and_go() {
+        let (endpoint, mut worker, coordinator) = worker_and_coordinator().await;
         let mut presence = watch_workers(&coordinator).await.unwrap();
         let name = ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
         assert_eq!(name, worker_key(&endpoint));
@@ -336,13 +343,7 @@ mod tests {
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_worker_stops_when_its_coordinator_is_gone() {
-        let endpoint = free_endpoint();
-        let worker_options = SessionOptions { listen: vec![endpoint.clone()], ..SessionOptions::default() };
-        let mut worker = WorkerPresence::start(&worker_options).await.unwrap();
-        let coordinator =
-            open(&SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() })
-                .await
-                .unwrap();
+        let (endpoint, mut worker, coordinator) = worker_and_coordinator().await;
         let token = announce_coordinator(&coordinator).await.unwrap();
         ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
         // Once the worker's side sees the coordinator's token, it dies.
