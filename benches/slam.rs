@@ -13,22 +13,14 @@ use std::time::Instant;
 use squall::bolts::sensor::LaserReading;
 use squall::bolts::slam::filter::Rbpf;
 use squall::bolts::slam::options::{Cutoff, SlamOptions};
-use squall::spouts::carmen::{Laser, ReadOptions, Record, read_log};
+use squall::spouts::carmen::{ReadOptions, read_front_scans};
 use squall::spouts::sim::office::office;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};
 
 fn aces() -> Vec<LaserReading> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.clf");
     assert!(path.exists(), "missing {}: this bench reads the shared data set", path.display());
-    read_log(&path, ReadOptions::default())
-        .expect("ACES parses")
-        .into_iter()
-        .filter_map(|r| match r {
-            Record::Scan(Laser::Front, s) => Some(s),
-            _ => None,
-        })
-        .take(1500)
-        .collect()
+    read_front_scans(&path, ReadOptions::default()).expect("ACES parses").into_iter().take(1500).collect()
 }
 
 fn simbad_like() -> Vec<LaserReading> {

@@ -13,7 +13,7 @@
 use anyhow::Context;
 use squall::bolts::eval::{relations, trajectory::Trajectory};
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
-use squall::spouts::carmen::{Laser, ReadOptions, Record, read_log};
+use squall::spouts::carmen::{ReadOptions, read_front_scans};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -23,14 +23,8 @@ fn main() -> anyhow::Result<()> {
     };
     let max_urange: f64 = args.get(3).map_or(Ok(80.0), |s| s.parse()).context("MAX_URANGE_M")?;
     let max_scans: usize = args.get(4).map_or(Ok(usize::MAX), |s| s.parse()).context("MAX_SCANS")?;
-    let scans: Vec<_> = read_log(log.as_ref(), ReadOptions::default())?
-        .into_iter()
-        .filter_map(|r| match r {
-            Record::Scan(Laser::Front, s) => Some(s),
-            _ => None,
-        })
-        .take(max_scans)
-        .collect();
+    let scans: Vec<_> =
+        read_front_scans(log.as_ref(), ReadOptions::default())?.into_iter().take(max_scans).collect();
     let mut filter =
         Rbpf::new(SlamOptions { max_urange, ..SlamOptions::default() }, 42).map_err(anyhow::Error::msg)?;
     let mut online = Trajectory::default();

@@ -9,7 +9,7 @@ use squall::bolts::geometry::Pose2;
 use squall::bolts::map::OccupancyGrid;
 use squall::bolts::sensor::LaserReading;
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
-use squall::spouts::carmen::{Laser, ReadOptions, Record, read_log};
+use squall::spouts::carmen::{ReadOptions, read_front_scans};
 use squall::spouts::sim::office::office;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};
 
@@ -65,14 +65,7 @@ fn shards_reproduce_the_serial_filter_on_the_simulator() {
 fn shards_reproduce_the_serial_filter_on_aces() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.clf");
     assert!(path.exists(), "missing {}: this test reads the shared data set", path.display());
-    let scans: Vec<LaserReading> = read_log(&path, ReadOptions::default())
-        .expect("ACES parses")
-        .into_iter()
-        .filter_map(|r| match r {
-            Record::Scan(Laser::Front, s) => Some(s),
-            _ => None,
-        })
-        .take(500)
-        .collect();
+    let scans: Vec<LaserReading> =
+        read_front_scans(&path, ReadOptions::default()).expect("ACES parses").into_iter().take(500).collect();
     assert_shards_agree(&scans, &SlamOptions::default(), [2, 3, 4]);
 }

@@ -17,7 +17,7 @@ use serde::Deserialize;
 use squall_bolts::geometry::Pose2;
 use squall_bolts::map::OccupancyGrid;
 use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
-use squall_topology::cluster::config::{Protocol, TlsSpec};
+use squall_topology::cluster::config::{TlsSpec, mismatched_endpoint};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
 use squall_topology::cluster::zenoh;
 use squall_topology::{
@@ -106,19 +106,12 @@ fn session_options(
     if listen.is_empty() && connect.is_empty() {
         return Err(ParamError::new("expected `listen` or `connect` endpoints (tcp/HOST:PORT)"));
     }
-    let tls = match tls {
-        None => None,
-        Some(t) => {
-            for file in [&t.root_ca, &t.certificate, &t.private_key] {
-                if !file.is_file() {
-                    return Err(ParamError::new(format!("tls: no such file: {}", file.display())));
-                }
-            }
-            Some(TlsSpec { root_ca: t.root_ca, certificate: t.certificate, private_key: t.private_key })
-        }
-    };
-    let wanted = if tls.is_some() { Protocol::Tls } else { Protocol::Tcp };
-    if let Some(e) = listen.iter().chain(&connect).find(|e| e.protocol != wanted) {
+    let tls =
+        tls.map(|t| TlsSpec { root_ca: t.root_ca, certificate: t.certificate, private_key: t.private_key });
+    if let Some(missing) = tls.as_ref().and_then(TlsSpec::missing_file) {
+        return Err(ParamError::new(format!("tls: no such file: {}", missing.display())));
+    }
+    if let Some(e) = mismatched_endpoint(listen.iter().chain(&connect), tls.is_some()) {
         let why = if tls.is_some() { "with `tls`, endpoints are tls/" } else { "tls/ endpoints need `tls`" };
         return Err(ParamError::new(format!("{e}: {why}")));
     }
@@ -224,12 +217,7 @@ impl Spout for LiveIngest {
                 sample = odometry_sample => {
                     let Some(sample) = sample else { continue };
                     match messages::odometry(&sample.payload().to_bytes()) {
-                        Ok(o) => self.push_odometry(Odometry {
-                            stamp: o.header.stamp,
-                            pose: o.pose,
-                            linear_velocity: o.linear_x,
-                            angular_velocity: o.angular_z,
-                        }),
+                        Ok(o) => self.push_odometry(o.into_odometry()),
                         Err(_) => out.count("malformed", 1),
                     }
                 }
@@ -288,7 +276,8 @@ struct PublishParams {
 
 /// `live.publish`: every `PoseStamped` it receives goes to the robot on
 /// `pose_key`; `OccupancyGrid`s (the best particle's map) on `map_key`, at
-/// most every `map_interval_secs`. Metrics: `poses_sent`, `maps_sent`,
+/// most every `map_interval_secs` (those in between are skipped and
+/// counted). Metrics: `poses_sent`, `maps_sent`, `maps_skipped`,
 /// `map_bytes`.
 #[derive(Debug)]
 pub struct LivePublish {
@@ -343,6 +332,8 @@ impl Bolt for LivePublish {
         }
         let map = input.get::<OccupancyGrid>().ok_or("live.publish takes PoseStamped and OccupancyGrid")?;
         if self.last_map.is_some_and(|at| at.elapsed() < self.map_interval) {
+            // A newer one will follow; the robot gets maps at the interval.
+            out.count("maps_skipped", 1);
             return Ok(());
         }
         self.last_map = Some(std::time::Instant::now());
@@ -352,12 +343,12 @@ impl Bolt for LivePublish {
                 stamp: std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
                     .map_or(0.0, |d| d.as_secs_f64()),
-                frame_id: self.frame_id.clone(),
+                frame_id: &self.frame_id,
                 resolution: map.resolution as f32,
                 width: u32::try_from(map.width)?,
                 height: u32::try_from(map.height)?,
                 origin: Pose2::new(map.origin.0, map.origin.1, 0.0),
-                data: map.cells.clone(),
+                data: &map.cells,
             })
             .ok_or("live.publish: a map whose cells do not fill width × height")?,
             Format::Squall => postcard::to_stdvec(map)?,

@@ -6,7 +6,7 @@ use common::shared;
 
 use squall_bolts::eval::relations::{self, read_relations};
 use squall_bolts::eval::trajectory::Trajectory;
-use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
+use squall_spouts::carmen::{ReadOptions, read_front_scans};
 use squall_spouts::rosbag2::{BagError, Topics, read_bag};
 
 /// The bag holds the same scans as the log. Their odometry poses are
@@ -21,14 +21,7 @@ fn the_aces_bag_matches_the_aces_log() {
     assert_eq!(bag.scans.len(), 7374);
     assert_eq!(bag.scans_without_odometry, 0);
     assert_eq!(bag.odometry.len(), 7375);
-    let log: Vec<_> = read_log(&shared("laser/aces.clf"), ReadOptions::default())
-        .unwrap()
-        .into_iter()
-        .filter_map(|r| match r {
-            Record::Scan(Laser::Front, s) => Some(s),
-            _ => None,
-        })
-        .collect();
+    let log = read_front_scans(&shared("laser/aces.clf"), ReadOptions::default()).unwrap();
     let (mut bag_odometry, mut log_odometry) = (Trajectory::default(), Trajectory::default());
     for (b, c) in bag.scans.iter().zip(&log) {
         assert!((b.stamp - c.stamp).abs() < 1e-5, "stamps {} vs {}", b.stamp, c.stamp);

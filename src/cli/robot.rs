@@ -10,7 +10,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use squall_bolts::sensor::{LaserReading, PoseStamped};
-use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
+use squall_spouts::carmen::{ReadOptions, read_front_scans};
 use squall_spouts::live::{Format, MAP_KEY, ODOM_KEY, POSE_KEY, SCAN_KEY};
 use squall_spouts::rosbag2::messages;
 use squall_topology::cluster::session::{SessionOptions, endpoints, open};
@@ -72,21 +72,14 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
         return ExitCode::from(EXIT_INVALID);
     }
     let format = if args.format == "squall" { Format::Squall } else { Format::Cdr };
-    let records = match read_log(&args.log, ReadOptions::default()) {
-        Ok(r) => r,
+    let mut scans = match read_front_scans(&args.log, ReadOptions::default()) {
+        Ok(s) => s,
         Err(e) => {
             eprintln!("squall robot: {e}");
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let scans: Vec<LaserReading> = records
-        .into_iter()
-        .filter_map(|r| match r {
-            Record::Scan(Laser::Front, s) => Some(s),
-            _ => None,
-        })
-        .take(args.max_scans.unwrap_or(usize::MAX))
-        .collect();
+    scans.truncate(args.max_scans.unwrap_or(usize::MAX));
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,
         Err(e) => {

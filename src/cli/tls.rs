@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use squall_topology::cluster::config::{Endpoint, Protocol, TlsSpec};
+use squall_topology::cluster::config::{Endpoint, TlsSpec, mismatched_endpoint};
 
 #[derive(Debug, clap::Args)]
 pub(super) struct TlsArgs {
@@ -27,15 +27,14 @@ impl TlsArgs {
     ) -> Result<Option<TlsSpec>, String> {
         let tls = match (&self.tls_ca, &self.tls_cert, &self.tls_key) {
             (Some(ca), Some(cert), Some(key)) => {
-                if let Some(missing) = [ca, cert, key].into_iter().find(|f| !f.is_file()) {
-                    return Err(format!("no such file: {}", missing.display()));
-                }
                 Some(TlsSpec { root_ca: ca.clone(), certificate: cert.clone(), private_key: key.clone() })
             }
             _ => None,
         };
-        let wanted = if tls.is_some() { Protocol::Tls } else { Protocol::Tcp };
-        if let Some(e) = endpoints.into_iter().find(|e| e.protocol != wanted) {
+        if let Some(missing) = tls.as_ref().and_then(TlsSpec::missing_file) {
+            return Err(format!("no such file: {}", missing.display()));
+        }
+        if let Some(e) = mismatched_endpoint(endpoints, tls.is_some()) {
             let why = if tls.is_some() {
                 "with --tls-ca, endpoints are tls/"
             } else {

@@ -137,12 +137,18 @@ impl Tile {
     /// with this digest is not sent it again. Computed once per content.
     pub fn digest(&self) -> u128 {
         *self.digest.get_or_init(|| {
+            // A row's cells as little-endian bytes at a time: one hasher
+            // call per row, not four per cell.
             let mut hasher = xxhash_rust::xxh3::Xxh3::new();
-            for c in self.cells.iter() {
-                hasher.update(&c.mean_x.to_le_bytes());
-                hasher.update(&c.mean_y.to_le_bytes());
-                hasher.update(&c.hits.to_le_bytes());
-                hasher.update(&c.visits.to_le_bytes());
+            let mut row = [0u8; 16 * TILE_SIDE];
+            for cells in self.cells.chunks_exact(TILE_SIDE) {
+                for (bytes, c) in row.chunks_exact_mut(16).zip(cells) {
+                    bytes[..4].copy_from_slice(&c.mean_x.to_le_bytes());
+                    bytes[4..8].copy_from_slice(&c.mean_y.to_le_bytes());
+                    bytes[8..12].copy_from_slice(&c.hits.to_le_bytes());
+                    bytes[12..].copy_from_slice(&c.visits.to_le_bytes());
+                }
+                hasher.update(&row);
             }
             hasher.digest128()
         })
@@ -211,16 +217,40 @@ pub struct TiledGrid {
 }
 
 /// A grid as it travels: everything but the derived per-metre factor and
-/// the clone counter.
-#[derive(Serialize, Deserialize)]
-pub(crate) struct GridWire {
+/// the clone counter, with its index entries as `T` (tiles themselves, or
+/// a transfer's references to them).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(crate) struct GridWire<T = Option<Arc<Tile>>> {
     pub(crate) resolution: Real,
     pub(crate) origin: (Real, Real),
     pub(crate) tile_min: (i64, i64),
     pub(crate) tiles_wide: usize,
     pub(crate) tiles_high: usize,
-    pub(crate) tiles: Vec<Option<Arc<Tile>>>,
+    pub(crate) tiles: Vec<T>,
     pub(crate) wall_threshold: Real,
+}
+
+impl<T> GridWire<T> {
+    /// The same grid with its index entries turned into `U`s.
+    pub(crate) fn map_tiles<U>(self, mut f: impl FnMut(T) -> U) -> GridWire<U> {
+        let Ok(mapped) = self.try_map_tiles(|t| Ok::<_, std::convert::Infallible>(f(t)));
+        mapped
+    }
+
+    /// The same grid with its index entries turned into `U`s (stopping at
+    /// the first error).
+    pub(crate) fn try_map_tiles<U, E>(self, f: impl FnMut(T) -> Result<U, E>) -> Result<GridWire<U>, E> {
+        let tiles = self.tiles.into_iter().map(f).collect::<Result<_, E>>()?;
+        Ok(GridWire {
+            resolution: self.resolution,
+            origin: self.origin,
+            tile_min: self.tile_min,
+            tiles_wide: self.tiles_wide,
+            tiles_high: self.tiles_high,
+            tiles,
+            wall_threshold: self.wall_threshold,
+        })
+    }
 }
 
 impl From<TiledGrid> for GridWire {

@@ -10,7 +10,6 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::Real;
 use crate::slam::grid::{GridWire, Tile, TiledGrid};
 
 /// A tile in a packed map.
@@ -26,25 +25,18 @@ pub enum PackedTile {
 
 /// A map as sent to one receiver.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct PackedGrid {
-    resolution: Real,
-    origin: (Real, Real),
-    tile_min: (i64, i64),
-    tiles_wide: usize,
-    tiles_high: usize,
-    wall_threshold: Real,
-    tiles: Vec<PackedTile>,
-}
+#[serde(transparent)]
+pub struct PackedGrid(GridWire<PackedTile>);
 
 impl PackedGrid {
     /// Tiles sent whole.
     pub fn whole_tiles(&self) -> usize {
-        self.tiles.iter().filter(|t| matches!(t, PackedTile::Whole(_))).count()
+        self.0.tiles.iter().filter(|t| matches!(t, PackedTile::Whole(_))).count()
     }
 
     /// Tiles sent by reference.
     pub fn held_tiles(&self) -> usize {
-        self.tiles.iter().filter(|t| matches!(t, PackedTile::Held(_))).count()
+        self.0.tiles.iter().filter(|t| matches!(t, PackedTile::Held(_))).count()
     }
 }
 
@@ -76,27 +68,13 @@ impl Sent {
 /// Packs `grid` for the receiver that `sent` describes, and records the
 /// tiles sent whole as held there.
 pub fn pack(grid: &TiledGrid, sent: &mut Sent) -> PackedGrid {
-    let wire = GridWire::from(grid.clone());
-    let tiles = wire
-        .tiles
-        .into_iter()
-        .map(|tile| match tile {
-            None => PackedTile::Empty,
-            Some(tile) => {
-                let digest = tile.digest();
-                if sent.held.insert(digest) { PackedTile::Whole(tile) } else { PackedTile::Held(digest) }
-            }
-        })
-        .collect();
-    PackedGrid {
-        resolution: wire.resolution,
-        origin: wire.origin,
-        tile_min: wire.tile_min,
-        tiles_wide: wire.tiles_wide,
-        tiles_high: wire.tiles_high,
-        wall_threshold: wire.wall_threshold,
-        tiles,
-    }
+    PackedGrid(GridWire::from(grid.clone()).map_tiles(|tile| match tile {
+        None => PackedTile::Empty,
+        Some(tile) => {
+            let digest = tile.digest();
+            if sent.held.insert(digest) { PackedTile::Whole(tile) } else { PackedTile::Held(digest) }
+        }
+    }))
 }
 
 /// The tiles a receiver holds, by digest: shared by every map it unpacks.
@@ -119,25 +97,13 @@ impl TileStore {
     /// Unpacks a map, keeping the tiles that came whole. The map is
     /// checked as any map read from bytes is.
     pub fn unpack(&mut self, packed: PackedGrid) -> Result<TiledGrid, UnpackError> {
-        let mut tiles = Vec::with_capacity(packed.tiles.len());
-        for tile in packed.tiles {
-            tiles.push(match tile {
-                PackedTile::Empty => None,
-                PackedTile::Held(digest) => {
-                    Some(self.tiles.get(&digest).cloned().ok_or(UnpackError::MissingTile(digest))?)
-                }
-                PackedTile::Whole(tile) => Some(self.tiles.entry(tile.digest()).or_insert(tile).clone()),
-            });
-        }
-        let wire = GridWire {
-            resolution: packed.resolution,
-            origin: packed.origin,
-            tile_min: packed.tile_min,
-            tiles_wide: packed.tiles_wide,
-            tiles_high: packed.tiles_high,
-            tiles,
-            wall_threshold: packed.wall_threshold,
-        };
+        let wire = packed.0.try_map_tiles(|tile| match tile {
+            PackedTile::Empty => Ok(None),
+            PackedTile::Held(digest) => {
+                Ok(Some(self.tiles.get(&digest).cloned().ok_or(UnpackError::MissingTile(digest))?))
+            }
+            PackedTile::Whole(tile) => Ok(Some(self.tiles.entry(tile.digest()).or_insert(tile).clone())),
+        })?;
         TiledGrid::try_from(wire).map_err(UnpackError::Invalid)
     }
 }
@@ -209,7 +175,7 @@ mod tests {
         assert!(matches!(fresh.unpack(after), Err(UnpackError::MissingTile(_))));
         // A damaged whole tile is refused like any damaged map.
         let mut damaged = before;
-        let tile = damaged.tiles.iter_mut().find_map(|t| match t {
+        let tile = damaged.0.tiles.iter_mut().find_map(|t| match t {
             PackedTile::Whole(t) => Some(t),
             _ => None,
         });
@@ -217,7 +183,7 @@ mod tests {
         let mut wire: serde_json::Value = serde_json::to_value(&broken).unwrap();
         wire["walls"][0] = serde_json::json!(u32::MAX);
         broken = serde_json::from_value(wire).unwrap();
-        *damaged.tiles.iter_mut().find(|t| matches!(t, PackedTile::Whole(_))).unwrap() =
+        *damaged.0.tiles.iter_mut().find(|t| matches!(t, PackedTile::Whole(_))).unwrap() =
             PackedTile::Whole(Arc::new(broken));
         assert!(matches!(TileStore::default().unpack(damaged), Err(UnpackError::Invalid(_))));
     }

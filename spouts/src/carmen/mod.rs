@@ -15,7 +15,7 @@ use squall_bolts::sensor::{LaserReading, Odometry};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 pub use parse::{Laser, LineParser, Record};
-pub use reader::{LogError, LogReader, ReadOptions, read_log};
+pub use reader::{LogError, LogReader, ReadOptions, read_front_scans, read_log};
 
 /// How fast the spout replays.
 #[derive(Debug, Clone, Copy, PartialEq)]

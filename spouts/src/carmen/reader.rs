@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 
 use flate2::read::MultiGzDecoder;
 
-use super::parse::{LineParser, Record};
+use squall_bolts::sensor::LaserReading;
+
+use super::parse::{Laser, LineParser, Record};
 
 /// A problem reading a log, with file and line.
 #[derive(Debug, thiserror::Error)]
@@ -154,4 +156,16 @@ impl Iterator for LogReader {
 /// Reads a whole log into memory.
 pub fn read_log(path: &Path, options: ReadOptions) -> Result<Vec<Record>, LogError> {
     LogReader::open(path, options)?.collect()
+}
+
+/// Reads a log's front-laser scans (each with the odometry at its stamp),
+/// in order: what SLAM and the robot player consume.
+pub fn read_front_scans(path: &Path, options: ReadOptions) -> Result<Vec<LaserReading>, LogError> {
+    LogReader::open(path, options)?
+        .filter_map(|r| match r {
+            Ok(Record::Scan(Laser::Front, s)) => Some(Ok(s)),
+            Ok(_) => None,
+            Err(e) => Some(Err(e)),
+        })
+        .collect()
 }

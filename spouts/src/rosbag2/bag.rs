@@ -151,14 +151,7 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
             }
             let decoded = match expected {
                 SCAN_TYPE => messages::laser_scan(&message.data).map(|m| raw_scans.push(m)),
-                ODOM_TYPE => messages::odometry(&message.data).map(|o| {
-                    odometry.push(Odometry {
-                        stamp: o.header.stamp,
-                        pose: o.pose,
-                        linear_velocity: o.linear_x,
-                        angular_velocity: o.angular_z,
-                    })
-                }),
+                ODOM_TYPE => messages::odometry(&message.data).map(|o| odometry.push(o.into_odometry())),
                 _ => messages::tf_message(&message.data).map(|t| statics.extend(t)),
             };
             match decoded {

@@ -111,24 +111,26 @@ impl CdrWriter {
         self.bytes.resize(self.bytes.len() + (data.div_ceil(to) * to - data), 0);
     }
 
+    /// A primitive's little-endian bytes, aligned to its size.
+    fn put<const N: usize>(&mut self, bytes: [u8; N]) {
+        self.align(N);
+        self.bytes.extend_from_slice(&bytes);
+    }
+
     pub(crate) fn u32(&mut self, v: u32) {
-        self.align(4);
-        self.bytes.extend_from_slice(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
 
     pub(crate) fn i32(&mut self, v: i32) {
-        self.align(4);
-        self.bytes.extend_from_slice(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
 
     pub(crate) fn f32(&mut self, v: f32) {
-        self.align(4);
-        self.bytes.extend_from_slice(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
 
     pub(crate) fn f64(&mut self, v: f64) {
-        self.align(8);
-        self.bytes.extend_from_slice(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
 
     /// A string: u32 length including the terminating NUL, the bytes, NUL.

@@ -4,7 +4,7 @@
 //! `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/OccupancyGrid`.
 
 use squall_bolts::geometry::Pose2;
-use squall_bolts::sensor::LaserReading;
+use squall_bolts::sensor::{LaserReading, Odometry};
 
 use super::cdr::{Cdr, CdrResult, CdrWriter};
 
@@ -101,6 +101,18 @@ pub struct OdometryMsg {
     pub angular_z: f64,
 }
 
+impl OdometryMsg {
+    /// The odometry reading it carries.
+    pub fn into_odometry(self) -> Odometry {
+        Odometry {
+            stamp: self.header.stamp,
+            pose: self.pose,
+            linear_velocity: self.linear_x,
+            angular_velocity: self.angular_z,
+        }
+    }
+}
+
 /// Decodes an `Odometry`.
 pub fn odometry(bytes: &[u8]) -> CdrResult<OdometryMsg> {
     let mut c = Cdr::new(bytes)?;
@@ -141,11 +153,17 @@ pub fn tf_message(bytes: &[u8]) -> CdrResult<Vec<Transform>> {
         .collect()
 }
 
-fn write_header(w: &mut CdrWriter, stamp: f64, frame_id: &str) {
+/// `builtin_interfaces/Time`: whole seconds and nanoseconds.
+fn write_stamp(w: &mut CdrWriter, stamp: f64) {
     let sec = stamp.floor();
     // Stamps outside i32 seconds (year 2038 on) saturate.
     w.i32(sec.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32);
     w.u32((((stamp - sec) * 1e9).round() as u32).min(999_999_999));
+}
+
+/// `std_msgs/Header`.
+fn write_header(w: &mut CdrWriter, stamp: f64, frame_id: &str) {
+    write_stamp(w, stamp);
     w.string(frame_id);
 }
 
@@ -174,12 +192,12 @@ pub fn read_pose_stamped(bytes: &[u8]) -> CdrResult<(Header, Pose2)> {
 
 /// A map to send as `nav_msgs/msg/OccupancyGrid`: row-major cells from
 /// the origin's corner, each −1 (unknown) or 0–100 (occupancy, %).
-#[derive(Debug, Clone, PartialEq)]
-pub struct OccupancyGridMsg {
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OccupancyGridMsg<'a> {
     /// Stamp, seconds.
     pub stamp: f64,
     /// The map's frame.
-    pub frame_id: String,
+    pub frame_id: &'a str,
     /// Metres per cell.
     pub resolution: f32,
     /// Cells per row.
@@ -189,31 +207,25 @@ pub struct OccupancyGridMsg {
     /// The pose of cell (0, 0)'s corner.
     pub origin: Pose2,
     /// `width × height` cells.
-    pub data: Vec<i8>,
+    pub data: &'a [i8],
 }
 
 /// Encodes a `nav_msgs/msg/OccupancyGrid`; `None` if `data` does not hold
 /// `width × height` cells.
-pub fn occupancy_grid(map: &OccupancyGridMsg) -> Option<Vec<u8>> {
+pub fn occupancy_grid(map: &OccupancyGridMsg<'_>) -> Option<Vec<u8>> {
     if map.data.len() != map.width as usize * map.height as usize {
         return None;
     }
     let mut w = CdrWriter::new();
-    write_header(&mut w, map.stamp, &map.frame_id);
+    write_header(&mut w, map.stamp, map.frame_id);
     // info: map_load_time, resolution, width, height, origin.
-    write_header_stamp_only(&mut w, map.stamp);
+    write_stamp(&mut w, map.stamp);
     w.f32(map.resolution);
     w.u32(map.width);
     w.u32(map.height);
     write_pose(&mut w, &map.origin);
     w.byte_seq(map.data.iter().map(|&v| v as u8));
     Some(w.finish())
-}
-
-fn write_header_stamp_only(w: &mut CdrWriter, stamp: f64) {
-    let sec = stamp.floor();
-    w.i32(sec.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32);
-    w.u32((((stamp - sec) * 1e9).round() as u32).min(999_999_999));
 }
 
 /// Encodes a `sensor_msgs/msg/LaserScan` as a ROS 2 driver would publish
@@ -255,15 +267,15 @@ mod encode_tests {
     use super::*;
 
     /// A 3 × 2 map with every kind of cell.
-    fn small_map() -> OccupancyGridMsg {
+    fn small_map() -> OccupancyGridMsg<'static> {
         OccupancyGridMsg {
             stamp: 3.5,
-            frame_id: "map".into(),
+            frame_id: "map",
             resolution: 0.05,
             width: 3,
             height: 2,
             origin: Pose2::new(-1.0, -0.5, 0.0),
-            data: vec![-1, 0, 100, 50, -1, 0],
+            data: &[-1, 0, 100, 50, -1, 0],
         }
     }
 

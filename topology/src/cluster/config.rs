@@ -107,6 +107,33 @@ pub struct TlsSpec {
     pub private_key: PathBuf,
 }
 
+impl TlsSpec {
+    /// The first of its files that is not there.
+    pub fn missing_file(&self) -> Option<&Path> {
+        [&self.root_ca, &self.certificate, &self.private_key]
+            .into_iter()
+            .find(|f| !f.is_file())
+            .map(PathBuf::as_path)
+    }
+}
+
+impl Protocol {
+    /// What endpoints speak with TLS configured (`tls/`) or without (`tcp/`).
+    pub fn with_tls(tls: bool) -> Self {
+        if tls { Protocol::Tls } else { Protocol::Tcp }
+    }
+}
+
+/// The first of `endpoints` whose protocol does not go with TLS being
+/// configured (`tls`) or not: a mixed set would fail only at connection
+/// time, with a less helpful message.
+pub fn mismatched_endpoint<'a>(
+    endpoints: impl IntoIterator<Item = &'a Endpoint>,
+    tls: bool,
+) -> Option<&'a Endpoint> {
+    endpoints.into_iter().find(|e| e.protocol != Protocol::with_tls(tls))
+}
+
 /// A checked cluster file.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ClusterSpec {
@@ -260,9 +287,8 @@ impl ClusterSpec {
                 private_key: resolve(&t.private_key),
             }
         });
-        let wanted = if tls.is_some() { Protocol::Tls } else { Protocol::Tcp };
         for w in &workers {
-            if w.endpoint.protocol != wanted {
+            if mismatched_endpoint([&w.endpoint], tls.is_some()).is_some() {
                 let why = if tls.is_some() {
                     "with [tls], endpoints are tls/"
                 } else {

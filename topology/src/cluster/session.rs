@@ -34,7 +34,7 @@ fn zenoh_error(e: impl std::fmt::Display) -> SessionError {
 }
 
 /// Where a session listens and what it connects to.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct SessionOptions {
     /// Endpoints to listen on (a worker's own).
     pub listen: Vec<Endpoint>,
@@ -79,14 +79,15 @@ pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
 /// ingest spout and publisher bolt) share one session, so a robot that
 /// connects to it reaches both.
 pub async fn shared(options: &SessionOptions) -> Result<Session, SessionError> {
-    static SESSIONS: tokio::sync::Mutex<Vec<(String, Session)>> = tokio::sync::Mutex::const_new(Vec::new());
-    let key = format!("{:?} {:?} {:?}", options.listen, options.connect, options.tls);
+    static SESSIONS: tokio::sync::Mutex<Vec<(SessionOptions, Session)>> =
+        tokio::sync::Mutex::const_new(Vec::new());
     let mut sessions = SESSIONS.lock().await;
-    if let Some((_, session)) = sessions.iter().find(|(k, s)| k == &key && !s.is_closed()) {
+    sessions.retain(|(_, s)| !s.is_closed());
+    if let Some((_, session)) = sessions.iter().find(|(o, _)| o == options) {
         return Ok(session.clone());
     }
     let session = open(options).await?;
-    sessions.push((key, session.clone()));
+    sessions.push((options.clone(), session.clone()));
     Ok(session)
 }
 
@@ -100,9 +101,14 @@ pub fn worker_key(endpoint: &Endpoint) -> String {
     endpoint.to_string().replace(['/', ':'], "_")
 }
 
+/// Where workers' liveliness tokens live.
+const WORKERS: &str = "squall/worker/";
+/// Where coordinators' liveliness tokens live.
+const COORDINATORS: &str = "squall/coordinator/";
+
 /// The key of a worker's liveliness token.
 pub fn presence_key(endpoint: &Endpoint) -> String {
-    format!("squall/worker/{}", worker_key(endpoint))
+    format!("{WORKERS}{}", worker_key(endpoint))
 }
 
 /// The key a worker takes control frames on.
@@ -198,7 +204,7 @@ impl WorkerPresence {
 /// Announces a coordinator: workers that see it go stop. Keep the token
 /// for the run.
 pub async fn announce_coordinator(session: &Session) -> Result<LivelinessToken, SessionError> {
-    let key = format!("squall/coordinator/{}", session.zid());
+    let key = format!("{COORDINATORS}{}", session.zid());
     session.liveliness().declare_token(key).await.map_err(zenoh_error)
 }
 
@@ -208,17 +214,11 @@ async fn watch_coordinators(
     session: &Session,
     stopped: Arc<tokio::sync::watch::Sender<Option<StopReason>>>,
 ) -> Result<(), SessionError> {
-    let subscriber = session
-        .liveliness()
-        .declare_subscriber("squall/coordinator/*")
-        .history(true)
-        .await
-        .map_err(zenoh_error)?;
+    let mut tokens = watch_tokens(session, COORDINATORS).await?;
     tokio::spawn(async move {
         let mut alive = std::collections::HashSet::new();
-        while let Ok(sample) = subscriber.recv_async().await {
-            let key = sample.key_expr().as_str().to_string();
-            if sample.kind() == SampleKind::Put {
+        while let Some((key, up)) = tokens.recv().await {
+            if up {
                 alive.insert(key);
             } else if alive.remove(&key) && alive.is_empty() {
                 tracing::warn!("worker: the coordinator {key} is gone; stopping");
@@ -265,16 +265,25 @@ pub async fn stop(session: &Session, endpoint: &Endpoint) -> Result<(), SessionE
 pub async fn watch_workers(
     session: &Session,
 ) -> Result<tokio::sync::mpsc::UnboundedReceiver<(String, bool)>, SessionError> {
+    watch_tokens(session, WORKERS).await
+}
+
+/// Follows the liveliness tokens under `prefix`: yields (the key after
+/// the prefix, alive) as they come and go, starting with those present.
+async fn watch_tokens(
+    session: &Session,
+    prefix: &'static str,
+) -> Result<tokio::sync::mpsc::UnboundedReceiver<(String, bool)>, SessionError> {
     let subscriber = session
         .liveliness()
-        .declare_subscriber("squall/worker/*")
+        .declare_subscriber(format!("{prefix}*"))
         .history(true)
         .await
         .map_err(zenoh_error)?;
     let (send, receive) = tokio::sync::mpsc::unbounded_channel();
     tokio::spawn(async move {
         while let Ok(sample) = subscriber.recv_async().await {
-            let key = sample.key_expr().as_str().trim_start_matches("squall/worker/").to_string();
+            let key = sample.key_expr().as_str().trim_start_matches(prefix).to_string();
             if send.send((key, sample.kind() == SampleKind::Put)).is_err() {
                 break;
             }
@@ -349,7 +358,7 @@ mod tests {
         // Once the worker's side sees the coordinator's token, it dies.
         let seen = async {
             loop {
-                let replies = worker.session().liveliness().get("squall/coordinator/*").await.unwrap();
+                let replies = worker.session().liveliness().get(format!("{COORDINATORS}*")).await.unwrap();
                 if replies.recv_async().await.is_ok() {
                     break;
                 }
