@@ -79,7 +79,9 @@ struct IngestParams {
     #[serde(default = "odom_key")]
     odom_key: String,
     tls: Option<TlsParams>,
-    /// End the stream when nothing has arrived for this long.
+    /// End the stream once the robot has gone quiet: nothing has arrived
+    /// for this long after its first scan. Before the first scan the link
+    /// waits for a robot however long it takes.
     idle_secs: Option<f64>,
     /// The laser's pose on the robot (x, y, θ), for CDR scans.
     #[serde(default)]
@@ -130,6 +132,8 @@ pub struct LiveIngest {
     format: Format,
     keys: (String, String),
     idle: Option<Duration>,
+    /// Whether a scan has arrived: the idle timer runs only after one has.
+    heard: bool,
     laser_offset: Pose2,
     subscribers: Option<(Subscriber, Option<Subscriber>)>,
     /// Odometry received, oldest first (about the last 10 s).
@@ -152,6 +156,7 @@ impl LiveIngest {
             format: params.format,
             keys: (params.scan_key, params.odom_key),
             idle,
+            heard: false,
             laser_offset: Pose2::new(x, y, theta),
             subscribers: None,
             odometry: Vec::new(),
@@ -200,8 +205,8 @@ impl Spout for LiveIngest {
             let (scans, odometry) = self.subscribers.as_ref().ok_or("live.ingest: not opened")?;
             let idle = async {
                 match self.idle {
-                    Some(d) => tokio::time::sleep(d).await,
-                    None => std::future::pending().await,
+                    Some(d) if self.heard => tokio::time::sleep(d).await,
+                    _ => std::future::pending().await,
                 }
             };
             let odometry_sample = async {
@@ -224,6 +229,7 @@ impl Spout for LiveIngest {
                 sample = scans.recv_async() => {
                     let Ok(sample) = sample else { return Ok(SpoutStatus::Done) };
                     let bytes = sample.payload().to_bytes();
+                    self.heard = true;
                     out.count("scans_received", 1);
                     let reading = match self.format {
                         Format::Squall => postcard::from_bytes::<LaserReading>(&bytes).ok(),
