@@ -139,7 +139,7 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
     };
     let spec = TopologySpec::parse_with("localize.toml (built in)", LOCALIZE_TOML, &overrides);
     match report_invalid(spec) {
-        Ok(topology) => run::run(&topology, Some(args.out.clone()), false),
+        Ok(topology) => run::run(&topology, Some(args.out.clone()), false, None),
         Err(code) => code,
     }
 }

@@ -75,6 +75,9 @@ enum Command {
         /// Do not print the summary table.
         #[arg(long)]
         quiet: bool,
+        /// Run on the workers of this cluster file (cluster mode).
+        #[arg(long, value_name = "CLUSTER.toml")]
+        cluster: Option<PathBuf>,
     },
     /// Check a topology without running it.
     Validate {
@@ -123,8 +126,8 @@ pub(crate) fn main() -> ExitCode {
         }
     };
     match cli.command {
-        Command::Run { topology, out, quiet } => match load(&topology) {
-            Ok(t) => run::run(&t, out, quiet),
+        Command::Run { topology, out, quiet, cluster } => match load(&topology) {
+            Ok(t) => run::run(&t, out, quiet, cluster.as_deref()),
             Err(code) => code,
         },
         Command::Validate { topology } => match load(&topology) {

@@ -1,6 +1,6 @@
 //! `squall run`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -8,16 +8,35 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use squall_topology::fsio::write_atomic;
 use squall_topology::{Progress, RunError, RunOptions, RunReport, Topology};
 
-use super::{EXIT_FAILED, progress::ProgressDisplay};
+use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay};
 
-/// Runs the topology, prints the summary, writes metrics.json.
-pub(super) fn run(topology: &Topology, out: Option<PathBuf>, quiet: bool) -> ExitCode {
+/// Runs the topology (in this process, or on the workers of a cluster
+/// file), prints the summary, writes metrics.json.
+pub(super) fn run(
+    topology: &Topology,
+    out: Option<PathBuf>,
+    quiet: bool,
+    cluster: Option<&Path>,
+) -> ExitCode {
     let progress = Arc::new(Progress::default());
-    let display = ProgressDisplay::start(progress.clone());
-    let options = RunOptions { out_dir: out.clone(), progress: Some(progress), ..RunOptions::default() };
+    let options =
+        RunOptions { out_dir: out.clone(), progress: Some(progress.clone()), ..RunOptions::default() };
     stop_on_ctrl_c(options.stop.clone());
-    let result = squall_topology::run(topology, &options);
-    display.finish();
+    let result = match cluster {
+        None => {
+            let display = ProgressDisplay::start(progress);
+            let result = squall_topology::run(topology, &options);
+            display.finish();
+            result
+        }
+        Some(file) => match on_cluster(topology, file, &options, progress) {
+            Ok(result) => result,
+            Err((code, message)) => {
+                eprintln!("error: {message}");
+                return ExitCode::from(code);
+            }
+        },
+    };
     if options.stop.load(Ordering::Relaxed) {
         eprintln!("note: stopped early by Ctrl-C; everything already emitted was processed");
     }
@@ -46,6 +65,41 @@ pub(super) fn run(topology: &Topology, out: Option<PathBuf>, quiet: bool) -> Exi
         code = ExitCode::from(EXIT_FAILED);
     }
     code
+}
+
+/// Runs on the cluster of `file`; a cluster that cannot run is an exit
+/// code with its message.
+#[cfg(feature = "cluster")]
+fn on_cluster(
+    topology: &Topology,
+    file: &Path,
+    options: &RunOptions,
+    progress: Arc<Progress>,
+) -> Result<Result<RunReport, RunError>, (u8, String)> {
+    use squall_topology::cluster::config::ClusterSpec;
+    use squall_topology::cluster::run::{ClusterRunError, run_on_cluster};
+    let cluster = ClusterSpec::load(file).map_err(|e| (EXIT_INVALID, e.to_string()))?;
+    let display = ProgressDisplay::start(progress);
+    let result = run_on_cluster(topology, &cluster, options);
+    display.finish();
+    match result {
+        Ok(report) => Ok(Ok(report)),
+        Err(ClusterRunError::Run(e)) => Ok(Err(e)),
+        Err(ClusterRunError::Setup(message)) => Err((EXIT_FAILED, message)),
+    }
+}
+
+#[cfg(not(feature = "cluster"))]
+fn on_cluster(
+    _: &Topology,
+    _: &Path,
+    _: &RunOptions,
+    _: Arc<Progress>,
+) -> Result<Result<RunReport, RunError>, (u8, String)> {
+    Err((
+        EXIT_INVALID,
+        "--cluster needs cluster mode: this squall was built without the `cluster` feature".into(),
+    ))
 }
 
 fn write_metrics(dir: &std::path::Path, report: &RunReport) -> std::io::Result<()> {

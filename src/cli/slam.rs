@@ -41,6 +41,9 @@ pub(super) struct SlamArgs {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub(super) out: PathBuf,
+    /// Run on the workers of this cluster file (cluster mode).
+    #[arg(long, value_name = "CLUSTER.toml")]
+    pub(super) cluster: Option<PathBuf>,
 }
 
 fn quoted(s: &str) -> String {
@@ -100,7 +103,7 @@ pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
 /// Runs `squall slam`.
 pub(super) fn slam(args: &SlamArgs) -> ExitCode {
     match topology(args) {
-        Ok(topology) => run::run(&topology, Some(args.out.clone()), false),
+        Ok(topology) => run::run(&topology, Some(args.out.clone()), false, args.cluster.as_deref()),
         Err(code) => code,
     }
 }

@@ -111,6 +111,7 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
         for &k in &matchers {
             let dir = args.out.join(format!("p{particles}-k{k}"));
             let slam = SlamArgs {
+                cluster: None,
                 log: args.log.clone(),
                 particles: Some(particles),
                 cutoff: args.cutoff.clone(),

@@ -1,11 +1,14 @@
 //! `squall worker`: a process that hosts tasks for a cluster's coordinator.
 //! It listens on an explicit endpoint, announces itself with a liveliness
-//! token, and answers the coordinator until told to stop (or killed).
+//! token, hosts the runs coordinators ship to it one after another, and
+//! stops when told, or when a coordinator whose run it hosts is gone.
 
 use std::process::ExitCode;
 
+use squall_topology::RunOptions;
 use squall_topology::cluster::config::Endpoint;
-use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, worker_key};
+use squall_topology::cluster::run::host_run;
+use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, reply_key, worker_key};
 
 use super::tls::TlsArgs;
 use super::{EXIT_FAILED, EXIT_INVALID};
@@ -18,6 +21,9 @@ pub(super) struct WorkerArgs {
     /// Other processes to connect to (repeatable).
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
+    /// Where tasks placed here write their outputs.
+    #[arg(long, value_name = "DIR")]
+    out: Option<std::path::PathBuf>,
     #[command(flatten)]
     tls: TlsArgs,
 }
@@ -53,12 +59,51 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             }
         };
         eprintln!("squall worker {} listening on {listen}", worker_key(&listen));
-        tokio::select! {
-            reason = presence.stopped() => match reason {
-                StopReason::Told => eprintln!("squall worker: stopped by the coordinator"),
-                StopReason::CoordinatorLost => eprintln!("squall worker: the coordinator is gone; stopping"),
-            },
-            _ = tokio::signal::ctrl_c() => eprintln!("squall worker: interrupted"),
+        loop {
+            let plan = tokio::select! {
+                reason = presence.stopped() => {
+                    report_stop(reason);
+                    break;
+                }
+                _ = tokio::signal::ctrl_c() => {
+                    eprintln!("squall worker: interrupted");
+                    break;
+                }
+                plan = presence.next_run() => match plan {
+                    Some(plan) => plan,
+                    None => break,
+                },
+            };
+            let session = presence.session().clone();
+            let reply = reply_key(presence.endpoint());
+            let release = presence.releaser();
+            let options = RunOptions { out_dir: args.out.clone(), ..RunOptions::default() };
+            let hosting = tokio::task::spawn_blocking(move || {
+                let registry = squall::builtin::registry();
+                host_run(&session, &plan, &registry, &reply, &options, &release)
+            });
+            tokio::select! {
+                hosted = hosting => match hosted {
+                    Ok(Ok(h)) => eprintln!(
+                        "squall worker: ran {} tasks of \"{}\"{}",
+                        h.tasks,
+                        h.topology,
+                        if h.aborted { " (aborted)" } else { "" }
+                    ),
+                    Ok(Err(e)) => eprintln!("squall worker: the run ended: {e}"),
+                    Err(e) => eprintln!("squall worker: the run's thread failed: {e}"),
+                },
+                reason = presence.stopped() => {
+                    // Tasks may still be running: leave now rather than
+                    // outlive the run.
+                    report_stop(reason);
+                    std::process::exit(i32::from(EXIT_FAILED));
+                }
+                _ = tokio::signal::ctrl_c() => {
+                    eprintln!("squall worker: interrupted during a run");
+                    std::process::exit(130);
+                }
+            }
         }
         let (too_large, malformed) = presence.rejections();
         if too_large + malformed > 0 {
@@ -67,4 +112,11 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
         let _ = presence.session().close().await;
         ExitCode::SUCCESS
     })
+}
+
+fn report_stop(reason: StopReason) {
+    match reason {
+        StopReason::Told => eprintln!("squall worker: stopped by the coordinator"),
+        StopReason::CoordinatorLost => eprintln!("squall worker: the coordinator is gone; stopping"),
+    }
 }

@@ -53,4 +53,7 @@ pub enum EmitError {
     /// The run is being aborted.
     #[error("the run is shutting down")]
     ShuttingDown,
+    /// The tuple could not be sent to a task in another process.
+    #[error("cannot send to another process: {0}")]
+    Transport(String),
 }

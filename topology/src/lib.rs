@@ -42,7 +42,7 @@ pub use error::{BoxError, EmitError, ParamError};
 pub use field_hash::FieldHashError;
 pub use grouping::{Grouping, OverflowPolicy};
 pub use message::{Message, MessageType, Payload};
-pub use metrics::{ComponentReport, CustomMetric, RunReport, TaskReport};
+pub use metrics::{ComponentReport, CustomMetric, EdgeReport, RunReport, TaskReport};
 pub use params::Params;
 pub use plan::Topology;
 pub use registry::Registry;

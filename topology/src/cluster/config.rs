@@ -11,8 +11,9 @@
 //! name = "w1"
 //! endpoint = "tcp/127.0.0.1:7447"     # where `squall worker --listen` listens
 //!
-//! [placement]                         # optional; the rest is spread evenly
+//! [placement]                         # optional (defaults below)
 //! matcher = ["w1", "w2", "w1"]        # task i of `matcher` on the i-th worker
+//! source = ["coordinator"]            # or in the coordinator's process
 //!
 //! [tls]                               # optional: mutual TLS, then endpoints are tls/
 //! root_ca = "ca.pem"                  # paths relative to this file
@@ -27,6 +28,28 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::spec::{SpecError, SpecErrors};
+
+/// The name placement uses for the coordinator's own process.
+pub const COORDINATOR_NAME: &str = "coordinator";
+
+/// Where a task runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Host {
+    /// In the coordinator's process.
+    Coordinator,
+    /// On the worker of this index in the cluster file.
+    Worker(usize),
+}
+
+impl Host {
+    /// Its number in a run: 0 the coordinator, w + 1 worker w.
+    pub fn number(self) -> u16 {
+        match self {
+            Host::Coordinator => 0,
+            Host::Worker(w) => w as u16 + 1,
+        }
+    }
+}
 
 /// A zenoh locator that a worker listens on: `tcp/HOST:PORT` or
 /// `tls/HOST:PORT`.
@@ -143,9 +166,9 @@ pub struct ClusterSpec {
     pub name: String,
     /// The workers, in file order.
     pub workers: Vec<WorkerSpec>,
-    /// Per component, the worker of each task (by index into `workers`);
-    /// components not listed are spread evenly.
-    pub placement: BTreeMap<String, Vec<usize>>,
+    /// Per component, the host of each task; see [`ClusterSpec::place`]
+    /// for components not listed.
+    pub placement: BTreeMap<String, Vec<Host>>,
     /// Mutual TLS, if configured.
     pub tls: Option<TlsSpec>,
 }
@@ -238,6 +261,13 @@ impl ClusterSpec {
                     w.name.span().start,
                     format!("worker name {name:?}: expected letters, digits, - or _"),
                 ));
+            } else if name == COORDINATOR_NAME {
+                errors.push(at(
+                    w.name.span().start,
+                    format!(
+                        "worker name {name:?} is reserved: placement uses it for the coordinator's process"
+                    ),
+                ));
             } else if !names.insert(name.clone()) {
                 errors.push(at(w.name.span().start, format!("worker {name:?} is declared twice")));
             }
@@ -257,8 +287,12 @@ impl ClusterSpec {
         for (component, tasks) in &raw.placement {
             let mut indices = Vec::new();
             for worker in tasks.get_ref() {
+                if worker.get_ref() == COORDINATOR_NAME {
+                    indices.push(Host::Coordinator);
+                    continue;
+                }
                 match declared.iter().position(|w| w == worker.get_ref()) {
-                    Some(i) => indices.push(i),
+                    Some(i) => indices.push(Host::Worker(i)),
                     None => errors.push(at(
                         worker.span().start,
                         format!("placement of {component:?}: no worker named {:?}", worker.get_ref()),
@@ -309,18 +343,22 @@ impl ClusterSpec {
         })
     }
 
-    /// The worker of each of `tasks` tasks of `component`: the explicit
-    /// placement where the file gives one (its length must match), else
-    /// spread evenly (task i on worker i mod n).
-    pub fn place(&self, component: &str, tasks: usize) -> Result<Vec<usize>, String> {
+    /// The host of each of `tasks` tasks of `component`: the explicit
+    /// placement where the file gives one (its length must match); else a
+    /// component of one task runs in the coordinator's process (sources,
+    /// dispatchers, sinks: where the run's input and output files are) and
+    /// a parallel one is spread evenly over the workers (task i on worker
+    /// i mod n).
+    pub fn place(&self, component: &str, tasks: usize) -> Result<Vec<Host>, String> {
         match self.placement.get(component) {
             Some(explicit) if explicit.len() == tasks => Ok(explicit.clone()),
             Some(explicit) => Err(format!(
-                "{}: placement of {component:?} names {} workers, but it has {tasks} tasks",
+                "{}: placement of {component:?} names {} hosts, but it has {tasks} tasks",
                 self.file,
                 explicit.len()
             )),
-            None => Ok((0..tasks).map(|i| i % self.workers.len()).collect()),
+            None if tasks == 1 => Ok(vec![Host::Coordinator]),
+            None => Ok((0..tasks).map(|i| Host::Worker(i % self.workers.len())).collect()),
         }
     }
 }
@@ -349,9 +387,16 @@ mod tests {
             Endpoint { protocol: Protocol::Tcp, host: "[::1]".into(), port: 7448 }
         );
         assert_eq!(c.workers[1].endpoint.to_string(), "tcp/[::1]:7448");
-        assert_eq!(c.place("matcher", 3).unwrap(), vec![1, 0, 1]);
-        assert_eq!(c.place("resampler", 3).unwrap(), vec![0, 1, 0]);
-        assert!(c.place("matcher", 2).unwrap_err().contains("names 3 workers, but it has 2 tasks"));
+        let (w0, w1) = (Host::Worker(0), Host::Worker(1));
+        assert_eq!(c.place("matcher", 3).unwrap(), vec![w1, w0, w1]);
+        assert_eq!(c.place("resampler", 3).unwrap(), vec![w0, w1, w0]);
+        assert_eq!(c.place("sink", 1).unwrap(), vec![Host::Coordinator]);
+        assert!(c.place("matcher", 2).unwrap_err().contains("names 3 hosts, but it has 2 tasks"));
+        let explicit = parse(&TWO.replace("[\"w2\", \"w1\", \"w2\"]", "[\"coordinator\", \"w1\"]")).unwrap();
+        assert_eq!(explicit.place("matcher", 2).unwrap(), vec![Host::Coordinator, w0]);
+        assert!(
+            messages(&TWO.replace("\"w1\"\nendpoint", "\"coordinator\"\nendpoint"))[0].contains("reserved")
+        );
     }
 
     #[test]

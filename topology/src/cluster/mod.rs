@@ -1,9 +1,10 @@
 //! Cluster mode (feature `cluster`): the same topologies across worker
-//! processes joined by zenoh. In so far: the cluster file, the frames that
-//! cross processes with their checks, and workers' sessions, presence and
-//! control. Running a topology's tasks on workers is to come.
+//! processes joined by zenoh: the cluster file, the frames that cross
+//! processes with their checks, workers' sessions, presence and control,
+//! and the runs themselves.
 
 pub mod config;
+pub mod run;
 pub mod session;
 pub mod wire;
 

@@ -11,7 +11,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::SampleKind;
 
 use crate::cluster::config::{Endpoint, TlsSpec};
-use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections};
+use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan};
 
 /// Errors opening or using a cluster session.
 #[derive(Debug, thiserror::Error)]
@@ -139,7 +139,13 @@ pub struct WorkerPresence {
     session: Session,
     rejections: Arc<Rejections>,
     stop: tokio::sync::watch::Receiver<Option<StopReason>>,
+    runs: tokio::sync::mpsc::UnboundedReceiver<Box<RunPlan>>,
+    endpoint: Endpoint,
+    released: Released,
 }
+
+/// Coordinators whose runs are over: their going does not stop the worker.
+type Released = Arc<std::sync::Mutex<std::collections::HashSet<String>>>;
 
 impl WorkerPresence {
     /// Opens the worker's session on `options.listen[0]` and announces it.
@@ -155,8 +161,11 @@ impl WorkerPresence {
         let rejections = Arc::new(Rejections::default());
         let (stopped, stop) = tokio::sync::watch::channel(None);
         let stopped = Arc::new(stopped);
-        watch_coordinators(&session, stopped.clone()).await?;
+        let released: Released = Arc::default();
+        watch_coordinators(&session, stopped.clone(), released.clone()).await?;
         let (answer, counts, name) = (session.clone(), rejections.clone(), worker_key(&endpoint));
+        let (plans, runs) = tokio::sync::mpsc::unbounded_channel();
+        let me = endpoint.clone();
         tokio::spawn(async move {
             let _token = token;
             while let Ok(sample) = control.recv_async().await {
@@ -171,6 +180,9 @@ impl WorkerPresence {
                     Ok(Frame::Control(Control::Stop)) => {
                         let _ = stopped.send(Some(StopReason::Told));
                     }
+                    Ok(Frame::Control(Control::Start(plan))) => {
+                        let _ = plans.send(plan);
+                    }
                     Ok(other) => tracing::warn!("worker {name}: unexpected on the control key: {other:?}"),
                     Err(e) => {
                         tracing::warn!("worker {name}: refused a control frame: {e}");
@@ -179,7 +191,26 @@ impl WorkerPresence {
                 }
             }
         });
-        Ok(WorkerPresence { session, rejections, stop })
+        Ok(WorkerPresence { session, rejections, stop, runs, endpoint: me, released })
+    }
+
+    /// A function that lets the worker outlive a coordinator whose run is
+    /// over (for [`crate::cluster::run::host_run`]).
+    pub fn releaser(&self) -> impl Fn(&str) + Send + 'static {
+        let released = self.released.clone();
+        move |coordinator: &str| {
+            released.lock().unwrap_or_else(|e| e.into_inner()).insert(coordinator.to_string());
+        }
+    }
+
+    /// The next run a coordinator asks this worker to host.
+    pub async fn next_run(&mut self) -> Option<Box<RunPlan>> {
+        self.runs.recv().await
+    }
+
+    /// The endpoint the worker listens on.
+    pub fn endpoint(&self) -> &Endpoint {
+        &self.endpoint
     }
 
     /// The worker's session.
@@ -193,34 +224,44 @@ impl WorkerPresence {
     }
 
     /// Waits until a coordinator sends `Stop` or the coordinators are gone.
-    pub async fn stopped(&mut self) -> StopReason {
-        match self.stop.wait_for(Option::is_some).await {
-            Ok(reason) => reason.unwrap_or(StopReason::Told),
-            Err(_) => StopReason::Told,
+    pub fn stopped(&self) -> impl std::future::Future<Output = StopReason> + Send + 'static {
+        let mut stop = self.stop.clone();
+        async move {
+            match stop.wait_for(Option::is_some).await {
+                Ok(reason) => reason.unwrap_or(StopReason::Told),
+                Err(_) => StopReason::Told,
+            }
         }
     }
 }
 
-/// Announces a coordinator: workers that see it go stop. Keep the token
-/// for the run.
+/// Announces a coordinator: workers hosting its run stop if it goes
+/// before the run is over. Keep the token for the run.
 pub async fn announce_coordinator(session: &Session) -> Result<LivelinessToken, SessionError> {
-    let key = format!("{COORDINATORS}{}", session.zid());
+    let key = format!("{COORDINATORS}{}", coordinator_id(session));
     session.liveliness().declare_token(key).await.map_err(zenoh_error)
 }
 
-/// Follows the coordinators' tokens; once every one seen is gone, tells
-/// the worker to stop.
+/// How a coordinator names itself to workers.
+pub fn coordinator_id(session: &Session) -> String {
+    session.zid().to_string()
+}
+
+/// Follows the coordinators' tokens; once every one seen is gone, except
+/// those that released the worker, tells the worker to stop.
 async fn watch_coordinators(
     session: &Session,
     stopped: Arc<tokio::sync::watch::Sender<Option<StopReason>>>,
+    released: Released,
 ) -> Result<(), SessionError> {
     let mut tokens = watch_tokens(session, COORDINATORS).await?;
     tokio::spawn(async move {
         let mut alive = std::collections::HashSet::new();
         while let Some((key, up)) = tokens.recv().await {
+            let was_released = || released.lock().unwrap_or_else(|e| e.into_inner()).remove(&key);
             if up {
                 alive.insert(key);
-            } else if alive.remove(&key) && alive.is_empty() {
+            } else if alive.remove(&key) && !was_released() && alive.is_empty() {
                 tracing::warn!("worker: the coordinator {key} is gone; stopping");
                 let _ = stopped.send(Some(StopReason::CoordinatorLost));
             }
@@ -293,7 +334,7 @@ async fn watch_tokens(
 }
 
 /// A nonce that differs between calls and processes.
-fn rand_nonce() -> u64 {
+pub(crate) fn rand_nonce() -> u64 {
     use std::hash::{BuildHasher, Hasher};
     let mut h = std::collections::hash_map::RandomState::new().build_hasher();
     h.write_u128(
@@ -327,7 +368,7 @@ mod tests {
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_coordinator_sees_a_worker_come_answer_and_go() {
-        let (endpoint, mut worker, coordinator) = worker_and_coordinator().await;
+        let (endpoint, worker, coordinator) = worker_and_coordinator().await;
         let mut presence = watch_workers(&coordinator).await.unwrap();
         let name = ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
         assert_eq!(name, worker_key(&endpoint));
@@ -352,7 +393,7 @@ mod tests {
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_worker_stops_when_its_coordinator_is_gone() {
-        let (endpoint, mut worker, coordinator) = worker_and_coordinator().await;
+        let (endpoint, worker, coordinator) = worker_and_coordinator().await;
         let token = announce_coordinator(&coordinator).await.unwrap();
         ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
         // Once the worker's side sees the coordinator's token, it dies.

@@ -19,28 +19,92 @@ pub const DEFAULT_MAX_FRAME: usize = 64 << 20;
 /// A message between the processes of a cluster.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Frame {
-    /// A tuple on an edge of the topology, for one task of the consumer.
+    /// A tuple on an edge of the topology, from one task of the producer
+    /// to one task of the consumer.
     Tuple {
-        /// The edge, by its index in the plan all processes share.
+        /// The edge, by its index in the plan all processes share (a
+        /// consumer's inputs in file order, then its peer messages).
         edge: u32,
-        /// The receiving task.
-        task: u32,
-        /// The message, postcard-encoded as the stream's type.
-        payload: Vec<u8>,
-    },
-    /// A message between two tasks of one component.
-    Peer {
-        /// The component, by its index in the plan.
-        component: u32,
         /// The sending task.
         from: u32,
         /// The receiving task.
         to: u32,
-        /// The message, postcard-encoded.
+        /// The message, postcard-encoded as the stream's type.
         payload: Vec<u8>,
+    },
+    /// Room given back on a `block` edge: the receiving side has queued
+    /// `n` more of the sender's tuples, so the sender may send `n` more.
+    Credit {
+        /// The edge.
+        edge: u32,
+        /// The sending task the room is for.
+        from: u32,
+        /// The receiving task.
+        to: u32,
+        /// Tuples.
+        n: u32,
     },
     /// Coordinator and workers managing a run.
     Control(Control),
+}
+
+/// A run as the coordinator ships it to a worker.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunPlan {
+    /// The key prefix of the run's traffic.
+    pub run: String,
+    /// The topology's file name, for messages.
+    pub file: String,
+    /// The topology's text, overrides applied.
+    pub topology: String,
+    /// `hosts[c][t]`: where task t of component c runs (0 the
+    /// coordinator, w + 1 the w-th worker of the cluster file).
+    pub hosts: Vec<Vec<u16>>,
+    /// The host number of the worker this is sent to.
+    pub host: u16,
+    /// The coordinator's id, as in its liveliness token: once the run is
+    /// over (collected or refused) the worker outlives this coordinator.
+    pub coordinator: String,
+}
+
+impl RunPlan {
+    /// The key the coordinator sends run control on.
+    pub fn control_key(&self) -> String {
+        format!("{}/ctl", self.run)
+    }
+
+    /// The key workers report on.
+    pub fn report_key(&self) -> String {
+        format!("{}/up", self.run)
+    }
+}
+
+/// What a task reports, as it crosses to the coordinator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum TaskEvent {
+    /// A spout task is exhausted.
+    SpoutDone,
+    /// `finish`/`close` returned.
+    Finished,
+    /// The task failed for good.
+    Failed(String),
+    /// The task's thread ended.
+    Exited,
+}
+
+/// The traffic a process sent on one edge.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct EdgeTraffic {
+    /// The edge.
+    pub edge: u32,
+    /// Tuples sent.
+    pub messages: u64,
+    /// Frame bytes sent.
+    pub bytes: u64,
+    /// Serializing, in nanoseconds.
+    pub encode_ns: u64,
+    /// Deserializing at the receivers of this process, in nanoseconds.
+    pub decode_ns: u64,
 }
 
 /// Run management between the coordinator and its workers.
@@ -58,8 +122,73 @@ pub enum Control {
         /// The answering worker's name.
         worker: String,
     },
-    /// End the run: the worker stops its tasks.
+    /// End the worker process.
     Stop,
+    /// The run is over: send `Outcomes` and let the run go.
+    Collect,
+    /// Host these tasks of this run: validate, wire, subscribe, then
+    /// answer `Ready` (or `Refused`) and wait for `Go`.
+    Start(Box<RunPlan>),
+    /// The worker has wired the run and listens for its tuples.
+    Ready {
+        /// The run.
+        run: String,
+    },
+    /// The worker cannot host the run.
+    Refused {
+        /// The run.
+        run: String,
+        /// Why.
+        reason: String,
+    },
+    /// Every host is ready: start the tasks.
+    Go,
+    /// Move every task of a component forward to a stage.
+    Advance {
+        /// The component, by index.
+        component: u32,
+        /// The stage (drain 1, finish 2, exit 3, abort 4).
+        stage: u8,
+    },
+    /// How far is the worker? Answered by `Totals`.
+    Status {
+        /// Matches the answer.
+        nonce: u64,
+    },
+    /// A host's tuples accepted and resolved so far (queues, and tuples
+    /// sent and received over links), and whether a tick is running.
+    Totals {
+        /// The question's nonce.
+        nonce: u64,
+        /// The answering host.
+        host: u16,
+        /// Accepted into queues plus sent to other processes.
+        accepted: u64,
+        /// Resolved by queues plus received from other processes.
+        resolved: u64,
+        /// A task is inside `tick`.
+        ticking: bool,
+    },
+    /// A task on a worker reports.
+    Event {
+        /// The component.
+        component: u32,
+        /// The task.
+        task: u32,
+        /// What happened.
+        event: TaskEvent,
+    },
+    /// A worker's last word on a run: its tasks' metrics and its traffic.
+    Outcomes {
+        /// The answering host.
+        host: u16,
+        /// (component, task, outcome).
+        tasks: Vec<(u32, u32, crate::metrics::OutcomeWire)>,
+        /// Traffic per edge.
+        edges: Vec<EdgeTraffic>,
+        /// Frames it refused: (too large, malformed).
+        refused: (u64, u64),
+    },
 }
 
 /// Why an incoming frame was refused.
@@ -156,8 +285,11 @@ mod tests {
 
     fn samples() -> Vec<Frame> {
         vec![
-            Frame::Tuple { edge: 3, task: 1, payload: vec![1, 2, 3] },
-            Frame::Peer { component: 2, from: 0, to: 2, payload: vec![9; 1000] },
+            Frame::Tuple { edge: 3, from: 0, to: 1, payload: vec![1, 2, 3] },
+            Frame::Tuple { edge: 2, from: 0, to: 2, payload: vec![9; 1000] },
+            Frame::Credit { edge: 2, from: 1, to: 0, n: 3 },
+            Frame::Control(Control::Advance { component: 2, stage: 3 }),
+            Frame::Control(Control::Event { component: 1, task: 0, event: TaskEvent::Failed("x".into()) }),
             Frame::Control(Control::Ping { nonce: 77 }),
             Frame::Control(Control::Pong { nonce: 77, worker: "w1".into() }),
             Frame::Control(Control::Stop),
@@ -173,7 +305,7 @@ mod tests {
 
     #[test]
     fn oversized_foreign_old_and_padded_frames_are_refused() {
-        let bytes = Frame::Peer { component: 0, from: 0, to: 1, payload: vec![0; 5000] }.encode();
+        let bytes = Frame::Tuple { edge: 0, from: 0, to: 1, payload: vec![0; 5000] }.encode();
         assert_eq!(Frame::decode(&bytes, 4096), Err(WireError::TooLarge { len: bytes.len(), max: 4096 }));
         assert_eq!(Frame::decode(b"GET / HTTP/1.1", DEFAULT_MAX_FRAME), Err(WireError::NotAFrame));
         assert_eq!(Frame::decode(b"SQ", DEFAULT_MAX_FRAME), Err(WireError::NotAFrame));

@@ -41,6 +41,8 @@ pub struct TopologySpec {
     /// Spouts then bolts, in file order.
     pub components: Vec<ComponentSpec>,
     pub(crate) source: SourceText,
+    /// The text this was parsed from, overrides applied.
+    text: std::sync::Arc<str>,
 }
 
 /// One `[[spout]]` or `[[bolt]]`.
@@ -150,12 +152,18 @@ impl TopologySpec {
             let line = e.span().map_or(0, |s| source.line(s.start));
             source.error_at_line(line, None, e.message().trim().to_string())
         })?;
-        convert(raw, source)
+        convert(raw, source, text.into())
     }
 
     /// The component called `name`.
     pub fn component(&self, name: &str) -> Option<&ComponentSpec> {
         self.components.iter().find(|c| c.name == name)
+    }
+
+    /// The topology's text with every override applied: parsing it again
+    /// gives this topology (cluster mode ships it to workers).
+    pub fn text(&self) -> &str {
+        &self.text
     }
 
     /// The file the topology came from, as given.
@@ -164,7 +172,7 @@ impl TopologySpec {
     }
 }
 
-fn convert(raw: RawFile, source: SourceText) -> Result<TopologySpec, SpecErrors> {
+fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> Result<TopologySpec, SpecErrors> {
     let mut errors = Vec::new();
     let topology = raw.topology.into_inner();
     let seed = match topology.seed {
@@ -199,7 +207,7 @@ fn convert(raw: RawFile, source: SourceText) -> Result<TopologySpec, SpecErrors>
         }
     }
     if errors.is_empty() {
-        Ok(TopologySpec { name, seed, components, source })
+        Ok(TopologySpec { name, seed, components, source, text })
     } else {
         Err(SpecErrors(errors))
     }

@@ -21,6 +21,20 @@ pub(crate) enum Stage {
     Abort = 4,
 }
 
+impl Stage {
+    /// The stage of this number (as stored, and as sent to workers).
+    pub(crate) fn from_u8(n: u8) -> Option<Stage> {
+        Some(match n {
+            0 => Stage::Run,
+            1 => Stage::Drain,
+            2 => Stage::Finish,
+            3 => Stage::Exit,
+            4 => Stage::Abort,
+            _ => return None,
+        })
+    }
+}
+
 /// Wakes one task's thread.
 ///
 /// Producers wake a consumer only when it has announced that it is parking,
@@ -80,13 +94,7 @@ impl Control {
     }
 
     pub(crate) fn stage(&self) -> Stage {
-        match self.stage.load(Ordering::SeqCst) {
-            0 => Stage::Run,
-            1 => Stage::Drain,
-            2 => Stage::Finish,
-            3 => Stage::Exit,
-            _ => Stage::Abort,
-        }
+        Stage::from_u8(self.stage.load(Ordering::SeqCst)).unwrap_or(Stage::Abort)
     }
 
     /// Moves the task forward to `stage` (never back) and wakes it.

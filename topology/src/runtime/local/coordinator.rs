@@ -14,6 +14,42 @@ use crate::runtime::local::control::{Event, EventKind, Stage};
 use crate::runtime::local::wiring::Wiring;
 use crate::spec::Role;
 
+/// The tasks of a run as the coordinator sees them, wherever they run:
+/// in this process, or (cluster mode) also on workers.
+pub(crate) trait Hosts {
+    /// Moves every task of `component` forward to `stage` and wakes it.
+    fn advance(&mut self, component: usize, stage: Stage);
+    /// (tuples accepted, tuples resolved) over every queue and every link
+    /// between processes, or `None` while a task is inside `tick`. Both
+    /// only grow, and resolved never passes accepted.
+    fn totals(&mut self) -> Option<(u64, u64)>;
+    /// Stops everything now: marks the run aborting and closes the queues.
+    fn abort(&mut self);
+}
+
+impl Hosts for &Wiring {
+    fn advance(&mut self, component: usize, stage: Stage) {
+        for control in &self.controls[component] {
+            control.advance(stage);
+        }
+    }
+
+    fn totals(&mut self) -> Option<(u64, u64)> {
+        if self.controls.iter().flatten().any(|c| c.ticking.load(Ordering::SeqCst)) {
+            return None;
+        }
+        Some(self.queue_totals())
+    }
+
+    fn abort(&mut self) {
+        self.aborting.store(true, Ordering::SeqCst);
+        for c in 0..self.controls.len() {
+            self.advance(c, Stage::Abort);
+        }
+        self.close_queues();
+    }
+}
+
 /// How often the coordinator looks at the run while it waits.
 const POLL: Duration = Duration::from_millis(1);
 
@@ -25,9 +61,9 @@ enum Phase {
     Exiting,
 }
 
-pub(crate) struct Coordinator<'a> {
+pub(crate) struct Coordinator<'a, H: Hosts> {
     topology: &'a Topology,
-    wiring: &'a Wiring,
+    hosts: H,
     spouts_running: usize,
     finished: Vec<usize>,
     exited: usize,
@@ -35,12 +71,12 @@ pub(crate) struct Coordinator<'a> {
     last_scan: Option<(u64, u64)>,
 }
 
-impl<'a> Coordinator<'a> {
-    pub(crate) fn new(topology: &'a Topology, wiring: &'a Wiring) -> Self {
+impl<'a, H: Hosts> Coordinator<'a, H> {
+    pub(crate) fn new(topology: &'a Topology, hosts: H) -> Self {
         let comps = &topology.components;
         Coordinator {
             topology,
-            wiring,
+            hosts,
             spouts_running: comps
                 .iter()
                 .filter(|c| c.spec.role == Role::Spout)
@@ -53,31 +89,22 @@ impl<'a> Coordinator<'a> {
         }
     }
 
-    fn advance(&self, component: usize, stage: Stage) {
-        for control in &self.wiring.controls[component] {
-            control.advance(stage);
-        }
+    fn advance(&mut self, component: usize, stage: Stage) {
+        self.hosts.advance(component, stage);
     }
 
-    /// True when all queues have resolved everything they accepted, no tick
-    /// is running, and the totals equal those of the previous look.
+    /// True when everything accepted has been resolved, no tick is running,
+    /// and the totals equal those of the previous look.
     fn quiescent(&mut self) -> bool {
-        let ticking = self.wiring.controls.iter().flatten().any(|c| c.ticking.load(Ordering::SeqCst));
-        let (mut accepted, mut resolved) = (0, 0);
-        for q in self.wiring.all_queues() {
-            let (a, r) = q.totals();
-            accepted += a;
-            resolved += r;
-        }
-        let scan = (accepted, resolved);
-        let stable = !ticking && accepted == resolved && self.last_scan == Some(scan);
-        self.last_scan = if ticking { None } else { Some(scan) };
+        let scan = self.hosts.totals();
+        let stable = matches!(scan, Some((a, r)) if a == r) && self.last_scan == scan;
+        self.last_scan = scan;
         stable
     }
 
     /// Runs the shutdown protocol; returns the first failure, if any.
     pub(crate) fn drive(
-        mut self,
+        &mut self,
         events: &mpsc::Receiver<Event>,
         grace: Duration,
     ) -> Option<(usize, usize, String)> {
@@ -131,17 +158,7 @@ impl<'a> Coordinator<'a> {
     }
 
     fn abort(&mut self, events: &mpsc::Receiver<Event>, grace: Duration) {
-        self.wiring.aborting.store(true, Ordering::SeqCst);
-        for c in 0..self.topology.components.len() {
-            self.advance(c, Stage::Abort);
-        }
-        for q in self.wiring.all_queues() {
-            for t in q.close() {
-                if let Some(a) = t.anchor {
-                    a.fail();
-                }
-            }
-        }
+        self.hosts.abort();
         let deadline = Instant::now() + grace;
         while self.exited < self.tasks {
             match events.recv_timeout(deadline.saturating_duration_since(Instant::now())) {

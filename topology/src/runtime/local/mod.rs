@@ -12,13 +12,13 @@
 
 pub(crate) mod acker;
 pub(crate) mod control;
-mod coordinator;
+pub(crate) mod coordinator;
 pub mod emitter;
 pub(crate) mod erased;
 pub(crate) mod queue;
 pub(crate) mod target;
 pub(crate) mod task;
-mod wiring;
+pub(crate) mod wiring;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -94,27 +94,83 @@ pub enum RunError {
 /// Runs `topology` in this process until its spouts are exhausted and every
 /// tuple is processed.
 pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunError> {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
+    let runtime = io_runtime()?;
+    let mut wiring = Wiring::build(topology, options, &|_| None);
+    let started = Instant::now();
+    let (events_tx, events) = mpsc::channel();
+    let threads = spawn_tasks(topology, &mut wiring, options, runtime.handle(), &events_tx, &|_, _| true)?;
+    drop(events_tx);
+    let failure = Coordinator::new(topology, &wiring).drive(&events, options.abort_grace);
+    let outcomes = join_tasks(threads, failure.is_none())
+        .into_iter()
+        .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
+        .collect::<Vec<Vec<_>>>();
+    runtime.shutdown_background();
+    let report = build_report(topology, &outcomes, started.elapsed());
+    finish_run(topology, report, failure)
+}
+
+/// The runtime that drives every task's async code (one thread: tasks run
+/// on their own threads and only block on it).
+pub(crate) fn io_runtime() -> std::io::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .thread_name("squall-io")
         .enable_all()
-        .build()?;
-    let mut wiring = Wiring::build(topology, options);
-    let started = Instant::now();
-    let (events_tx, events) = mpsc::channel();
-    let mut threads: Vec<Vec<Option<JoinHandle<TaskOutcome>>>> = Vec::new();
+        .build()
+}
+
+/// The report as the run's result: an error naming the failed task, if any.
+pub(crate) fn finish_run(
+    topology: &Topology,
+    report: RunReport,
+    failure: Option<(usize, usize, String)>,
+) -> Result<RunReport, RunError> {
+    match failure {
+        None => Ok(report),
+        Some((c, task, message)) => {
+            let spec = &topology.components[c].spec;
+            Err(RunError::TaskFailed {
+                role: spec.role,
+                component: spec.name.clone(),
+                task,
+                message,
+                report: Box::new(report),
+            })
+        }
+    }
+}
+
+/// A thread per task that `here` says runs in this process (`None` for the
+/// others).
+pub(crate) type TaskThreads = Vec<Vec<Option<JoinHandle<TaskOutcome>>>>;
+
+/// Starts the threads of the tasks for which `here(component, task)` holds.
+pub(crate) fn spawn_tasks(
+    topology: &Topology,
+    wiring: &mut Wiring,
+    options: &RunOptions,
+    runtime: &tokio::runtime::Handle,
+    events: &mpsc::Sender<control::Event>,
+    here: &dyn Fn(usize, usize) -> bool,
+) -> std::io::Result<TaskThreads> {
+    let mut threads: TaskThreads = Vec::new();
     for (c, planned) in topology.components.iter().enumerate() {
         let mut handles = Vec::new();
         for t in 0..planned.spec.parallelism {
+            if !here(c, t) {
+                handles.push(None);
+                continue;
+            }
             let common = TaskCommon {
                 ctx: wiring.context(topology, c, t),
                 component: c,
                 control: wiring.controls[c][t].clone(),
                 emitter: wiring.emitters[c][t].take().expect("each emitter used once"),
-                events: events_tx.clone(),
+                events: events.clone(),
                 finished: false,
             };
-            let handle = runtime.handle().clone();
+            let handle = runtime.clone();
             let params = planned.params.clone();
             let restarts = planned.spec.max_restarts;
             let name = format!("{}#{t}", planned.spec.name);
@@ -146,44 +202,32 @@ pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunEr
         }
         threads.push(handles);
     }
-    drop(events_tx);
-    let failure = Coordinator::new(topology, &wiring).drive(&events, options.abort_grace);
-    let outcomes: Vec<Vec<TaskOutcome>> = threads
+    Ok(threads)
+}
+
+/// Joins the task threads. After a failure, threads that have not ended
+/// within the abort's grace are left behind and give no outcome.
+pub(crate) fn join_tasks(threads: TaskThreads, clean: bool) -> Vec<Vec<Option<TaskOutcome>>> {
+    threads
         .into_iter()
         .map(|handles| {
             handles
                 .into_iter()
                 .map(|h| match h {
-                    Some(h) if h.is_finished() || failure.is_none() => {
-                        h.join().unwrap_or_else(|_| lost_outcome())
-                    }
-                    _ => lost_outcome(),
+                    Some(h) if h.is_finished() || clean => Some(h.join().unwrap_or_else(|_| lost_outcome())),
+                    Some(_) => Some(lost_outcome()),
+                    None => None,
                 })
                 .collect()
         })
-        .collect();
-    runtime.shutdown_background();
-    let report = build_report(topology, &outcomes, started.elapsed());
-    match failure {
-        None => Ok(report),
-        Some((c, task, message)) => {
-            let spec = &topology.components[c].spec;
-            Err(RunError::TaskFailed {
-                role: spec.role,
-                component: spec.name.clone(),
-                task,
-                message,
-                report: Box::new(report),
-            })
-        }
-    }
+        .collect()
 }
 
-fn lost_outcome() -> TaskOutcome {
+pub(crate) fn lost_outcome() -> TaskOutcome {
     TaskOutcome { stats: Default::default(), dropped: 0, undelivered: 0, queue_depth_max: 0 }
 }
 
-fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], wall: Duration) -> RunReport {
+pub(crate) fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], wall: Duration) -> RunReport {
     let components: Vec<_> = topology
         .components
         .iter()
@@ -211,5 +255,6 @@ fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], wall: Durati
         wall_secs: wall.as_secs_f64(),
         components,
         warnings,
+        edges: Vec::new(),
     }
 }

@@ -20,6 +20,9 @@ use crate::tuple::Tuple;
 pub(crate) enum Target {
     /// A task in this process.
     Local(Arc<EdgeQueue>),
+    /// A task in another process of a cluster run.
+    #[cfg(feature = "cluster")]
+    Remote(Arc<crate::cluster::run::link::RemoteTarget>),
 }
 
 impl Target {
@@ -32,7 +35,18 @@ impl Target {
         aborting: &AtomicBool,
         blocked: &mut Duration,
     ) -> Result<(), EmitError> {
-        let Target::Local(queue) = self;
+        let queue = match self {
+            Target::Local(queue) => queue,
+            #[cfg(feature = "cluster")]
+            Target::Remote(remote) => {
+                // Cluster runs refuse acking topologies that span
+                // processes, so a remote tuple has no anchor.
+                return match remote.deliver(tuple, blocked).await {
+                    Err(_) if aborting.load(Ordering::Relaxed) => Err(EmitError::ShuttingDown),
+                    other => other,
+                };
+            }
+        };
         match queue.push(tuple, blocked).await {
             Push::Queued => Ok(()),
             Push::Dropped(victim) => {

@@ -29,8 +29,26 @@ pub(crate) struct Wiring {
     progress: Option<Arc<Progress>>,
 }
 
+/// One delivery path: from task `from` of component `producer` to task
+/// `to` of component `consumer`, through the consumer's input `slot` (its
+/// inputs in file order, then the peer queue).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Hop {
+    pub(crate) producer: usize,
+    pub(crate) from: usize,
+    pub(crate) consumer: usize,
+    pub(crate) slot: usize,
+    pub(crate) to: usize,
+}
+
+/// Gives the target of a hop whose consumer task runs in another process;
+/// `None` for a task in this one.
+pub(crate) type Elsewhere<'a> = &'a dyn Fn(&Hop) -> Option<Target>;
+
 impl Wiring {
-    pub(crate) fn build(topology: &Topology, options: &RunOptions) -> Self {
+    /// Every task's queues and emitter; a hop to a task in another process
+    /// gets the target `elsewhere` gives it.
+    pub(crate) fn build(topology: &Topology, options: &RunOptions, elsewhere: Elsewhere<'_>) -> Self {
         let comps = &topology.components;
         let aborting = Arc::new(AtomicBool::new(false));
         let controls: Vec<Vec<Arc<Control>>> = comps
@@ -123,8 +141,16 @@ impl Wiring {
                                         if input.from != p.spec.name || input.stream != decl.name {
                                             continue;
                                         }
-                                        let targets: Vec<Target> =
-                                            edge[ci][ii].iter().cloned().map(Target::Local).collect();
+                                        let targets: Vec<Target> = edge[ci][ii]
+                                            .iter()
+                                            .enumerate()
+                                            .map(|(to, queue)| {
+                                                let hop =
+                                                    Hop { producer: c, from: t, consumer: ci, slot: ii, to };
+                                                elsewhere(&hop)
+                                                    .unwrap_or_else(|| Target::Local(queue.clone()))
+                                            })
+                                            .collect();
                                         let route = match &input.grouping {
                                             Grouping::Shuffle | Grouping::LocalOrShuffle => Route::RoundRobin,
                                             Grouping::Fields(f) => {
@@ -159,7 +185,16 @@ impl Wiring {
                         let peers = p.declared.peer.map(|message| PeerRoute {
                             message,
                             source: Source::Peer { task: t }.interned(),
-                            targets: peer[c].iter().flatten().cloned().map(Target::Local).collect(),
+                            targets: peer[c]
+                                .iter()
+                                .flatten()
+                                .enumerate()
+                                .map(|(to, queue)| {
+                                    let slot = p.spec.inputs.len();
+                                    let hop = Hop { producer: c, from: t, consumer: c, slot, to };
+                                    elsewhere(&hop).unwrap_or_else(|| Target::Local(queue.clone()))
+                                })
+                                .collect(),
                         });
                         let acking = p.spec.ack.map(|a| SpoutAcking {
                             tracker: trackers[c][t].clone().expect("tracker exists when acking"),
@@ -197,6 +232,23 @@ impl Wiring {
 
     pub(crate) fn all_queues(&self) -> impl Iterator<Item = &Arc<EdgeQueue>> {
         self.inboxes.iter().flatten().flatten()
+    }
+
+    /// (accepted, resolved) summed over every queue.
+    pub(crate) fn queue_totals(&self) -> (u64, u64) {
+        self.all_queues().map(|q| q.totals()).fold((0, 0), |(a, r), (qa, qr)| (a + qa, r + qr))
+    }
+
+    /// Closes every queue at an abort; the tuples left in them fail their
+    /// acking trees.
+    pub(crate) fn close_queues(&self) {
+        for q in self.all_queues() {
+            for t in q.close() {
+                if let Some(a) = t.anchor {
+                    a.fail();
+                }
+            }
+        }
     }
 }
 

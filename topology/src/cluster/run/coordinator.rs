@@ -1,0 +1,420 @@
+//! The coordinator of a cluster run: it reaches every worker of the
+//! cluster file, places the tasks, ships the topology, starts the run once
+//! every host is wired, drives the same shutdown protocol as the local
+//! runtime over all hosts, and gathers every task's metrics and the
+//! traffic between processes into one report.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use zenoh::Session;
+use zenoh::Wait;
+
+use crate::cluster::config::ClusterSpec;
+use crate::cluster::run::host::HostRun;
+use crate::cluster::run::layout::Layout;
+use crate::cluster::session::{self, SessionOptions, control_key, reply_key, worker_key};
+use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, EdgeTraffic, Frame, RunPlan, TaskEvent};
+use crate::metrics::{EdgeReport, RunReport, TaskOutcome};
+use crate::plan::Topology;
+use crate::runtime::local::control::{Event, EventKind, Stage};
+use crate::runtime::local::coordinator::{Coordinator, Hosts};
+use crate::runtime::local::{RunError, RunOptions, build_report, finish_run, lost_outcome};
+
+/// How long the coordinator waits for a worker to answer at the start.
+const REACH: Duration = Duration::from_secs(10);
+/// How long it waits for every worker to be wired for the run.
+const READY: Duration = Duration::from_secs(30);
+/// How long a look at the workers' totals may take.
+const STATUS: Duration = Duration::from_secs(2);
+/// How long it waits for the workers' metrics at the end.
+const COLLECT: Duration = Duration::from_secs(10);
+
+/// A cluster run that could not start or failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ClusterRunError {
+    /// The run could not be set up (a worker unreachable or refusing,
+    /// a placement that does not fit).
+    #[error("{0}")]
+    Setup(String),
+    /// The run itself failed.
+    #[error(transparent)]
+    Run(#[from] RunError),
+}
+
+fn setup(message: impl std::fmt::Display) -> ClusterRunError {
+    ClusterRunError::Setup(message.to_string())
+}
+
+/// What workers send up during a run, besides task events.
+enum Up {
+    Totals {
+        nonce: u64,
+        host: u16,
+        totals: Option<(u64, u64)>,
+    },
+    Outcomes {
+        host: u16,
+        tasks: Vec<(u32, u32, crate::metrics::OutcomeWire)>,
+        edges: Vec<EdgeTraffic>,
+        refused: (u64, u64),
+    },
+}
+
+/// Runs `topology` on the workers of `cluster` (and in this process, for
+/// the tasks placed on the coordinator) until its spouts are exhausted and
+/// every tuple is processed.
+pub fn run_on_cluster(
+    topology: &Topology,
+    cluster: &ClusterSpec,
+    options: &RunOptions,
+) -> Result<RunReport, ClusterRunError> {
+    let io = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name("squall-coordinator")
+        .enable_all()
+        .build()
+        .map_err(|e| setup(format!("cannot start the runtime: {e}")))?;
+    let connect = cluster.workers.iter().map(|w| w.endpoint.clone()).collect();
+    let session_options = SessionOptions { listen: Vec::new(), connect, tls: cluster.tls.clone() };
+    let session = io.block_on(session::open(&session_options)).map_err(setup)?;
+    let result = coordinate(topology, cluster, options, &session, &io);
+    let _ = session.close().wait();
+    io.shutdown_background();
+    result
+}
+
+fn coordinate(
+    topology: &Topology,
+    cluster: &ClusterSpec,
+    options: &RunOptions,
+    session: &Session,
+    io: &tokio::runtime::Runtime,
+) -> Result<RunReport, ClusterRunError> {
+    for w in &cluster.workers {
+        io.block_on(session::ping(session, &w.endpoint, REACH)).map_err(|e| {
+            setup(format!(
+                "worker \"{}\" does not answer ({e}): is `squall worker --listen {}` running there?",
+                w.name, w.endpoint
+            ))
+        })?;
+    }
+    let hosts = placement(topology, cluster)?;
+    let host_count = cluster.workers.len() + 1;
+    let layout = Arc::new(Layout::new(topology, hosts.clone(), host_count).map_err(setup)?);
+    refuse_acking_across_hosts(topology, &layout)?;
+    let run = format!("squall/{}/run/{:016x}", cluster.name, session::rand_nonce());
+    let _token = io.block_on(session::announce_coordinator(session)).map_err(setup)?;
+    let (events_tx, events) = mpsc::channel::<Event>();
+    let (up_tx, up) = mpsc::channel::<Up>();
+    let plan = |host: u16| RunPlan {
+        run: run.clone(),
+        file: topology.spec().file().to_string(),
+        topology: topology.spec().text().to_string(),
+        hosts: hosts.clone(),
+        host,
+        coordinator: session::coordinator_id(session),
+    };
+    let reports = {
+        let events_tx = events_tx.clone();
+        session
+            .declare_subscriber(plan(0).report_key())
+            .callback(move |sample| match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
+                Ok(Frame::Control(Control::Event { component, task, event })) => {
+                    let kind = match event {
+                        TaskEvent::SpoutDone => EventKind::SpoutDone,
+                        TaskEvent::Finished => EventKind::Finished,
+                        TaskEvent::Failed(m) => EventKind::Failed(m),
+                        TaskEvent::Exited => EventKind::Exited,
+                    };
+                    let _ =
+                        events_tx.send(Event { component: component as usize, task: task as usize, kind });
+                }
+                Ok(Frame::Control(Control::Totals { nonce, host, accepted, resolved, ticking })) => {
+                    let totals = (!ticking).then_some((accepted, resolved));
+                    let _ = up_tx.send(Up::Totals { nonce, host, totals });
+                }
+                Ok(Frame::Control(Control::Outcomes { host, tasks, edges, refused })) => {
+                    let _ = up_tx.send(Up::Outcomes { host, tasks, edges, refused });
+                }
+                Ok(other) => tracing::warn!("coordinator: unexpected report {other:?}"),
+                Err(e) => tracing::warn!("coordinator: refused a report: {e}"),
+            })
+            .wait()
+            .map_err(setup)?
+    };
+    let mut local = HostRun::build(topology, layout.clone(), session, &run, 0, options).map_err(setup)?;
+    start_workers(cluster, session, &plan)?;
+    let control = plan(0).control_key();
+    put(session, &control, Control::Go).map_err(setup)?;
+    let started = Instant::now();
+    local.start(topology, options, &events_tx).map_err(|e| setup(format!("cannot start tasks: {e}")))?;
+    watch_for_lost_workers(io, session, cluster, &layout, events_tx.clone())?;
+    drop(events_tx);
+    let workers: Vec<u16> = (1..host_count as u16).collect();
+    let mut hosts_view = ClusterHosts {
+        local: &local,
+        session,
+        control: control.clone(),
+        up: &up,
+        workers,
+        stash: Vec::new(),
+        next_nonce: 1,
+    };
+    let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options.abort_grace);
+    let stash = std::mem::take(&mut hosts_view.stash);
+    put(session, &control, Control::Collect).map_err(setup)?;
+    let mut outcomes: Vec<Vec<Option<TaskOutcome>>> =
+        topology.components.iter().map(|c| vec![None; c.spec.parallelism]).collect();
+    for (c, t, o) in local.join(failure.is_none()) {
+        outcomes[c][t] = Some(o);
+    }
+    let mut traffic: HashMap<u32, EdgeTraffic> = HashMap::new();
+    let mut merge = |edges: Vec<EdgeTraffic>| {
+        for e in edges {
+            let m = traffic.entry(e.edge).or_insert(EdgeTraffic { edge: e.edge, ..Default::default() });
+            m.messages += e.messages;
+            m.bytes += e.bytes;
+            m.encode_ns += e.encode_ns;
+            m.decode_ns += e.decode_ns;
+        }
+    };
+    merge(local.link.traffic());
+    let mut warnings = Vec::new();
+    let mut refused = local.link.rejections.totals();
+    let mut missing: Vec<u16> = (1..host_count as u16).collect();
+    let deadline = Instant::now() + COLLECT;
+    let mut pending = stash.into_iter();
+    while !missing.is_empty() {
+        let next = match pending.next() {
+            Some(u) => u,
+            None => match up.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                Ok(u) => u,
+                Err(_) => break,
+            },
+        };
+        let Up::Outcomes { host, tasks, edges, refused: (large, bad) } = next else { continue };
+        missing.retain(|&h| h != host);
+        for (c, t, wire) in tasks {
+            let slot = outcomes.get_mut(c as usize).and_then(|c| c.get_mut(t as usize));
+            match (slot, TaskOutcome::from_wire(wire)) {
+                (Some(slot), Ok(o)) => *slot = Some(o),
+                (_, Err(e)) => warnings.push(format!("worker {host}: a task's metrics did not decode: {e}")),
+                (None, _) => warnings.push(format!("worker {host}: metrics for a task that does not exist")),
+            }
+        }
+        merge(edges);
+        refused = (refused.0 + large, refused.1 + bad);
+    }
+    for h in missing {
+        warnings.push(format!(
+            "worker \"{}\" sent no metrics: its tasks are reported empty",
+            cluster.workers[usize::from(h) - 1].name
+        ));
+    }
+    drop(reports);
+    drop(local);
+    let outcomes: Vec<Vec<TaskOutcome>> = outcomes
+        .into_iter()
+        .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
+        .collect();
+    let mut report = build_report(topology, &outcomes, started.elapsed());
+    report.warnings.extend(warnings);
+    if refused.0 + refused.1 > 0 {
+        report.warnings.push(format!(
+            "frames refused between processes: {} over the size limit, {} malformed",
+            refused.0, refused.1
+        ));
+    }
+    report.edges = edge_reports(&layout, topology, traffic);
+    Ok(finish_run(topology, report, failure)?)
+}
+
+/// Every task's host number: the cluster file's placement, or its default.
+fn placement(topology: &Topology, cluster: &ClusterSpec) -> Result<Vec<Vec<u16>>, ClusterRunError> {
+    for name in cluster.placement.keys() {
+        if topology.spec().component(name).is_none() {
+            return Err(setup(format!(
+                "{}: placement of {name:?}: the topology \"{}\" has no such component",
+                cluster.file,
+                topology.name()
+            )));
+        }
+    }
+    topology
+        .components
+        .iter()
+        .map(|c| {
+            let hosts = cluster.place(&c.spec.name, c.spec.parallelism).map_err(setup)?;
+            Ok(hosts.into_iter().map(|h| h.number()).collect())
+        })
+        .collect()
+}
+
+/// Acking trees do not yet span processes: a topology with acking must
+/// keep every task in one process.
+fn refuse_acking_across_hosts(topology: &Topology, layout: &Layout) -> Result<(), ClusterRunError> {
+    let first = layout.hosts.iter().flatten().next().copied().unwrap_or(0);
+    let one_host = layout.hosts.iter().flatten().all(|&h| h == first);
+    match topology.components.iter().find(|c| c.spec.ack.is_some()) {
+        Some(c) if !one_host => Err(setup(format!(
+            "spout \"{}\" tracks its tuples (ack), which cluster mode does not support across processes yet: \
+             place every component in one process, or run without ack",
+            c.spec.name
+        ))),
+        _ => Ok(()),
+    }
+}
+
+fn put(session: &Session, key: &str, control: Control) -> Result<(), String> {
+    session.put(key, Frame::Control(control).encode()).wait().map_err(|e| e.to_string())
+}
+
+/// Ships the plan to every worker and waits until each is wired.
+fn start_workers(
+    cluster: &ClusterSpec,
+    session: &Session,
+    plan: &dyn Fn(u16) -> RunPlan,
+) -> Result<(), ClusterRunError> {
+    let mut replies = Vec::new();
+    for (w, worker) in cluster.workers.iter().enumerate() {
+        let subscriber = session.declare_subscriber(reply_key(&worker.endpoint)).wait().map_err(setup)?;
+        let start = Control::Start(Box::new(plan(w as u16 + 1)));
+        put(session, &control_key(&worker.endpoint), start).map_err(setup)?;
+        replies.push(subscriber);
+    }
+    let deadline = Instant::now() + READY;
+    for (worker, replies) in cluster.workers.iter().zip(&replies) {
+        loop {
+            let wait = deadline.saturating_duration_since(Instant::now());
+            let sample = replies.recv_timeout(wait).map_err(setup)?.ok_or_else(|| {
+                setup(format!("worker \"{}\" did not get ready within {} s", worker.name, READY.as_secs()))
+            })?;
+            match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
+                Ok(Frame::Control(Control::Ready { .. })) => break,
+                Ok(Frame::Control(Control::Refused { reason, .. })) => {
+                    return Err(setup(format!("worker \"{}\" refused the run: {reason}", worker.name)));
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Turns the loss of a worker hosting tasks into a task failure.
+fn watch_for_lost_workers(
+    io: &tokio::runtime::Runtime,
+    session: &Session,
+    cluster: &ClusterSpec,
+    layout: &Layout,
+    events: mpsc::Sender<Event>,
+) -> Result<(), ClusterRunError> {
+    let mut tokens = io.block_on(session::watch_workers(session)).map_err(setup)?;
+    // (worker key, name, the first of its tasks)
+    type Watched = (String, String, Option<(usize, usize)>);
+    let watched: Vec<Watched> = cluster
+        .workers
+        .iter()
+        .enumerate()
+        .map(|(w, spec)| {
+            let host = w as u16 + 1;
+            let first = layout
+                .hosts
+                .iter()
+                .enumerate()
+                .find_map(|(c, tasks)| tasks.iter().position(|&h| h == host).map(|t| (c, t)));
+            (worker_key(&spec.endpoint), spec.name.clone(), first)
+        })
+        .collect();
+    io.spawn(async move {
+        while let Some((key, alive)) = tokens.recv().await {
+            if alive {
+                continue;
+            }
+            for (watched_key, name, first) in &watched {
+                if *watched_key == key
+                    && let Some((component, task)) = *first
+                {
+                    let message = format!("failed: its worker \"{name}\" is gone");
+                    let _ = events.send(Event { component, task, kind: EventKind::Failed(message) });
+                }
+            }
+        }
+    });
+    Ok(())
+}
+
+/// The run's hosts as the shutdown protocol sees them.
+struct ClusterHosts<'a> {
+    local: &'a HostRun,
+    session: &'a Session,
+    control: String,
+    up: &'a mpsc::Receiver<Up>,
+    workers: Vec<u16>,
+    /// Reports that came while waiting for totals (outcomes of workers
+    /// done early).
+    stash: Vec<Up>,
+    next_nonce: u64,
+}
+
+impl Hosts for &mut ClusterHosts<'_> {
+    fn advance(&mut self, component: usize, stage: Stage) {
+        self.local.advance(component, stage);
+        let advance = Control::Advance { component: component as u32, stage: stage as u8 };
+        if let Err(e) = put(self.session, &self.control, advance) {
+            tracing::warn!("coordinator: cannot reach the workers: {e}");
+        }
+    }
+
+    fn totals(&mut self) -> Option<(u64, u64)> {
+        let (mut accepted, mut resolved) = self.local.totals()?;
+        let nonce = self.next_nonce;
+        self.next_nonce += 1;
+        put(self.session, &self.control, Control::Status { nonce }).ok()?;
+        let mut waiting = self.workers.clone();
+        let deadline = Instant::now() + STATUS;
+        while !waiting.is_empty() {
+            match self.up.recv_timeout(deadline.saturating_duration_since(Instant::now())).ok()? {
+                Up::Totals { nonce: n, host, totals } if n == nonce => {
+                    let (a, r) = totals?;
+                    waiting.retain(|&h| h != host);
+                    accepted += a;
+                    resolved += r;
+                }
+                Up::Totals { .. } => {}
+                other => self.stash.push(other),
+            }
+        }
+        Some((accepted, resolved))
+    }
+
+    fn abort(&mut self) {
+        for c in 0..self.local.layout.hosts.len() {
+            self.advance(c, Stage::Abort);
+        }
+    }
+}
+
+/// The traffic per edge, named, in edge order.
+fn edge_reports(layout: &Layout, topology: &Topology, traffic: HashMap<u32, EdgeTraffic>) -> Vec<EdgeReport> {
+    let mut edges: Vec<_> = traffic.into_values().collect();
+    edges.sort_by_key(|e| e.edge);
+    edges
+        .into_iter()
+        .filter_map(|t| {
+            let info = layout.edges.get(t.edge as usize)?;
+            Some(EdgeReport {
+                from: topology.components[info.producer].spec.name.clone(),
+                stream: info.stream.to_string(),
+                to: topology.components[info.consumer].spec.name.clone(),
+                messages: t.messages,
+                bytes: t.bytes,
+                encode_ms: t.encode_ns as f64 / 1e6,
+                decode_ms: t.decode_ns as f64 / 1e6,
+            })
+        })
+        .collect()
+}
