@@ -4,6 +4,7 @@
 //! and the runs themselves.
 
 pub mod config;
+pub mod outcome;
 pub mod run;
 pub mod session;
 pub mod wire;

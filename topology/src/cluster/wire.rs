@@ -183,7 +183,7 @@ pub enum Control {
         /// The answering host.
         host: u16,
         /// (component, task, outcome).
-        tasks: Vec<(u32, u32, crate::metrics::OutcomeWire)>,
+        tasks: Vec<(u32, u32, crate::cluster::outcome::OutcomeWire)>,
         /// Traffic per edge.
         edges: Vec<EdgeTraffic>,
         /// Frames it refused: (too large, malformed).

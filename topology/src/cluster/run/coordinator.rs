@@ -57,7 +57,7 @@ enum Up {
     },
     Outcomes {
         host: u16,
-        tasks: Vec<(u32, u32, crate::metrics::OutcomeWire)>,
+        tasks: Vec<(u32, u32, crate::cluster::outcome::OutcomeWire)>,
         edges: Vec<EdgeTraffic>,
         refused: (u64, u64),
     },

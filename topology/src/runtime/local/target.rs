@@ -29,6 +29,7 @@ impl Target {
     /// Delivers `tuple`, waiting under `block` (the wait is added to
     /// `blocked`). A tuple dropped by policy or refused by an exited consumer
     /// fails its acking tree; only an abort is an error.
+    #[cfg_attr(not(feature = "cluster"), allow(clippy::infallible_destructuring_match))]
     pub(crate) async fn deliver(
         &self,
         tuple: Tuple,

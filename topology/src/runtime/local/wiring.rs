@@ -33,6 +33,7 @@ pub(crate) struct Wiring {
 /// `to` of component `consumer`, through the consumer's input `slot` (its
 /// inputs in file order, then the peer queue).
 #[derive(Debug, Clone, Copy)]
+#[cfg_attr(not(feature = "cluster"), allow(dead_code))]
 pub(crate) struct Hop {
     pub(crate) producer: usize,
     pub(crate) from: usize,

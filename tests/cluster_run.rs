@@ -1,0 +1,163 @@
+//! Topologies across worker processes on loopback: `squall run --cluster`
+//! and `squall slam --cluster` give what the in-process runtime gives,
+//! every grouping keeps its meaning across processes, block edges hold
+//! producers back without losing a tuple, drop policies drop and count.
+#![cfg(feature = "cluster")]
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::cluster::Workers;
+
+fn squall(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_squall"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .output()
+        .expect("squall runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn metrics(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap()
+}
+
+fn component<'a>(metrics: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap()
+}
+
+fn counts(dir: &Path) -> BTreeMap<String, u64> {
+    let tsv = std::fs::read_to_string(dir.join("wordcount.tsv")).unwrap();
+    tsv.lines()
+        .skip(1)
+        .map(|l| {
+            let (w, c) = l.split_once('\t').unwrap();
+            (w.to_string(), c.parse().unwrap())
+        })
+        .collect()
+}
+
+fn aces() -> String {
+    let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.clf");
+    assert!(log.exists(), "missing {}: this test plays the shared data's ACES log", log.display());
+    log.display().to_string()
+}
+
+#[test]
+fn wordcount_on_two_workers_counts_exactly_what_it_counts_in_process() {
+    let workers = Workers::start(2);
+    // split on both workers, count's three tasks spread over them (shuffle
+    // and fields across processes), report with the coordinator (global).
+    let cluster = workers.cluster_file("");
+    let sets = ["--set", "sentences.params.count=3000", "--set", "count.parallelism=3", "--quiet"];
+    let (local, remote) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["run", "examples/topologies/wordcount.toml"];
+        args.extend(sets);
+        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        squall(&args)
+    };
+    let done = run(local.path(), &[]);
+    assert!(done.status.success(), "{}", text(&done.stderr));
+    let done = run(remote.path(), &["--cluster", cluster.to_str().unwrap()]);
+    assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+    assert_eq!(counts(remote.path()), counts(local.path()));
+    let m = metrics(remote.path());
+    let words: u64 = counts(local.path()).values().sum();
+    assert_eq!(component(&m, "count")["received"], words);
+    // Tuples crossed processes on every edge but the spout's (split runs
+    // on the workers, the spout with the coordinator: that crosses too).
+    let edges = m["edges"].as_array().expect("a cluster run reports its edges");
+    let edge = |from: &str, to: &str| edges.iter().find(|e| e["from"] == from && e["to"] == to);
+    assert_eq!(edge("sentences", "split").unwrap()["messages"], 3000);
+    assert!(edge("split", "count").unwrap()["messages"].as_u64().unwrap() > 0);
+    assert!(edge("count", "report").unwrap()["bytes"].as_u64().unwrap() > 0);
+    // Spread evenly: split 0 and count 0, 2 on w1; split 1 and count 1 on w2.
+    for (w, tasks) in [(0, 3), (1, 2)] {
+        let needle = format!("ran {tasks} tasks of \"wordcount\"");
+        let log = workers.wait_for_log(w, &needle);
+        assert!(log.contains(&needle), "worker {w}: {log}");
+    }
+}
+
+#[test]
+fn a_slow_consumer_in_another_process_holds_its_producer_back_or_drops_by_policy() {
+    let workers = Workers::start(1);
+    let cluster = workers.cluster_file("sink = [\"w1\"]");
+    let run = |policy: &str| {
+        let out = tempfile::tempdir().unwrap();
+        let done = squall(&[
+            "run",
+            "examples/topologies/probe.toml",
+            "--set",
+            "source.params.count=400",
+            "--set",
+            "relay.inputs.0.queue=4",
+            "--set",
+            "sink.params.delay_us=2000",
+            "--set",
+            "sink.inputs.0.queue=4",
+            "--set",
+            &format!("sink.inputs.0.policy=\"{policy}\""),
+            "--quiet",
+            "--out",
+            out.path().to_str().unwrap(),
+            "--cluster",
+            cluster.to_str().unwrap(),
+        ]);
+        assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+        metrics(out.path())
+    };
+    // block: every probe arrives, and the relay waited for room.
+    let m = run("block");
+    let sink = component(&m, "sink");
+    assert_eq!(sink["received"], 400);
+    assert_eq!(sink["dropped"], 0);
+    assert!(component(&m, "relay")["backpressure_pct"].as_f64().unwrap() > 10.0, "{m}");
+    // drop_newest: the sink's queue drops what does not fit, counted, and
+    // nothing else is lost.
+    let m = run("drop_newest");
+    let sink = component(&m, "sink");
+    let (received, dropped) = (sink["received"].as_u64().unwrap(), sink["dropped"].as_u64().unwrap());
+    assert!(dropped > 0, "{m}");
+    assert_eq!(received + dropped, 400);
+}
+
+#[test]
+fn slam_with_three_matchers_on_three_workers_gives_the_in_process_run_byte_for_byte() {
+    let workers = Workers::start(3);
+    let cluster = workers.cluster_file("");
+    let (alone, spread) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let slam = |out: &Path, extra: &[&str]| {
+        let log = aces();
+        let mut args = vec!["slam", "--log", log.as_str(), "--max-scans", "300"];
+        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        squall(&args)
+    };
+    let done = slam(alone.path(), &["--matchers", "1"]);
+    assert!(done.status.success(), "{}", text(&done.stderr));
+    let done = slam(spread.path(), &["--matchers", "3", "--cluster", cluster.to_str().unwrap()]);
+    assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+    for file in ["trajectory.tum", "map.pgm", "map.png", "map.yaml"] {
+        let (a, b) = (
+            std::fs::read(alone.path().join(file)).unwrap(),
+            std::fs::read(spread.path().join(file)).unwrap(),
+        );
+        assert!(a == b, "{file} differs between the in-process K = 1 run and 3 workers");
+    }
+    for w in 0..3 {
+        let log = workers.wait_for_log(w, "ran 1 tasks of \"slam\"");
+        assert!(log.contains("ran 1 tasks of \"slam\""), "worker {w}: {log}");
+    }
+    let m = metrics(spread.path());
+    let edges = m["edges"].as_array().unwrap();
+    assert!(edges.iter().any(|e| e["stream"] == "peer"), "particle transfers crossed processes: {m}");
+}

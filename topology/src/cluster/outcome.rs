@@ -1,0 +1,145 @@
+//! Task metrics as they travel from a worker to the coordinator.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use hdrhistogram::Histogram;
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::{Custom, TaskOutcome, TaskStats, new_histogram};
+
+/// A task's outcome as it travels from a worker to the coordinator:
+/// histograms in HdrHistogram's portable V2 encoding.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutcomeWire {
+    received: u64,
+    emitted: u64,
+    busy_ns: u64,
+    blocked_ns: u64,
+    wall_ns: u64,
+    latency: Vec<u8>,
+    restarts: u32,
+    acked: u64,
+    failed: u64,
+    replayed: u64,
+    abandoned: u64,
+    custom: Vec<(String, CustomWire)>,
+    dropped: u64,
+    undelivered: u64,
+    queue_depth_max: u64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+enum CustomWire {
+    Counter(u64),
+    Values(Vec<u8>),
+}
+
+fn histogram_bytes(h: &Histogram<u64>) -> Vec<u8> {
+    use hdrhistogram::serialization::Serializer;
+    let mut bytes = Vec::new();
+    hdrhistogram::serialization::V2Serializer::new()
+        .serialize(h, &mut bytes)
+        .expect("a histogram serializes into memory");
+    bytes
+}
+
+fn histogram_from(bytes: &[u8]) -> Result<Histogram<u64>, String> {
+    let h: Histogram<u64> = hdrhistogram::serialization::Deserializer::new()
+        .deserialize(&mut &bytes[..])
+        .map_err(|e| format!("bad histogram: {e:?}"))?;
+    let mut bounded = new_histogram();
+    bounded.add(&h).map_err(|e| format!("histogram out of bounds: {e:?}"))?;
+    Ok(bounded)
+}
+
+impl TaskOutcome {
+    /// The outcome in its portable form.
+    pub(crate) fn to_wire(&self) -> OutcomeWire {
+        let s = &self.stats;
+        let nanos = |d: Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+        OutcomeWire {
+            received: s.received,
+            emitted: s.emitted,
+            busy_ns: nanos(s.busy),
+            blocked_ns: nanos(s.blocked),
+            wall_ns: nanos(s.wall),
+            latency: histogram_bytes(&s.latency),
+            restarts: s.restarts,
+            acked: s.acked,
+            failed: s.failed,
+            replayed: s.replayed,
+            abandoned: s.abandoned,
+            custom: s
+                .custom
+                .iter()
+                .map(|(k, v)| {
+                    let v = match v {
+                        Custom::Counter(c) => CustomWire::Counter(*c),
+                        Custom::Values(h) => CustomWire::Values(histogram_bytes(h)),
+                    };
+                    (k.clone(), v)
+                })
+                .collect(),
+            dropped: self.dropped,
+            undelivered: self.undelivered,
+            queue_depth_max: self.queue_depth_max as u64,
+        }
+    }
+
+    /// The outcome back from its portable form; an error if a histogram
+    /// does not decode.
+    pub(crate) fn from_wire(w: OutcomeWire) -> Result<Self, String> {
+        let mut custom = BTreeMap::new();
+        for (k, v) in w.custom {
+            let v = match v {
+                CustomWire::Counter(c) => Custom::Counter(c),
+                CustomWire::Values(bytes) => Custom::Values(Box::new(histogram_from(&bytes)?)),
+            };
+            custom.insert(k, v);
+        }
+        Ok(TaskOutcome {
+            stats: TaskStats {
+                received: w.received,
+                emitted: w.emitted,
+                busy: Duration::from_nanos(w.busy_ns),
+                blocked: Duration::from_nanos(w.blocked_ns),
+                wall: Duration::from_nanos(w.wall_ns),
+                latency: histogram_from(&w.latency)?,
+                restarts: w.restarts,
+                acked: w.acked,
+                failed: w.failed,
+                replayed: w.replayed,
+                abandoned: w.abandoned,
+                custom,
+            },
+            dropped: w.dropped,
+            undelivered: w.undelivered,
+            queue_depth_max: usize::try_from(w.queue_depth_max).unwrap_or(usize::MAX),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::task_report;
+
+    #[test]
+    fn an_outcome_survives_its_portable_form() {
+        let mut stats =
+            TaskStats { received: 7, emitted: 3, busy: Duration::from_millis(5), ..Default::default() };
+        stats.latency.record(1500).unwrap();
+        stats.latency.record(90_000).unwrap();
+        stats.count("scans", 4);
+        stats.record("evaluations", 120);
+        stats.record("evaluations", 40);
+        let outcome = TaskOutcome { stats, dropped: 2, undelivered: 1, queue_depth_max: 9 };
+        let bytes = postcard::to_stdvec(&outcome.to_wire()).unwrap();
+        let back = TaskOutcome::from_wire(postcard::from_bytes(&bytes).unwrap()).unwrap();
+        assert_eq!(task_report(0, &back).execute, task_report(0, &outcome).execute);
+        assert_eq!(task_report(0, &back).custom, task_report(0, &outcome).custom);
+        assert_eq!((back.dropped, back.undelivered, back.queue_depth_max), (2, 1, 9));
+        assert_eq!(back.stats.busy, Duration::from_millis(5));
+    }
+}
