@@ -91,7 +91,13 @@ impl Declarer {
     /// Declares the type tasks of this component send each other by index
     /// (peer exchange).
     pub fn peer<T: Message>(&mut self) -> &mut Self {
-        self.peer = Some(MessageType::of::<T>());
+        self.peer_message(MessageType::of::<T>())
+    }
+
+    /// Declares the peer message type by its description (for a type that
+    /// crosses processes incrementally: [`MessageType::incremental`]).
+    pub fn peer_message(&mut self, message: MessageType) -> &mut Self {
+        self.peer = Some(message);
         self
     }
 

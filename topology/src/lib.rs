@@ -41,7 +41,7 @@ pub use declare::{Accepts, DEFAULT_STREAM, Declarer, StreamDecl};
 pub use error::{BoxError, EmitError, ParamError};
 pub use field_hash::FieldHashError;
 pub use grouping::{Grouping, OverflowPolicy};
-pub use message::{Message, MessageType, Payload};
+pub use message::{Incremental, Message, MessageType, Payload};
 pub use metrics::{ComponentReport, CustomMetric, EdgeReport, RunReport, TaskReport};
 pub use params::Params;
 pub use plan::Topology;

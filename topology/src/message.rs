@@ -25,6 +25,40 @@ impl<T: Serialize + DeserializeOwned + Send + Sync + 'static> Message for T {}
 /// A message as it travels inside one process: shared, never copied.
 pub type Payload = Arc<dyn Any + Send + Sync>;
 
+/// A message that, sent again and again from one task to another in
+/// another process, need not carry what the receiver already holds (a
+/// particle's map tiles). Sender and receiver each keep a record for the
+/// pair; messages between them arrive in order, so the records stay in
+/// step. Within one process the message travels as an `Arc`, as any other.
+pub trait Incremental: Message {
+    /// What a sending task remembers of one receiving task.
+    type Sent: Default + Send + 'static;
+    /// What a receiving task keeps of one sending task.
+    type Held: Default + Send + 'static;
+
+    /// The message's bytes, leaving out what `sent` says the receiver
+    /// holds (and recording what it will hold).
+    fn encode_incremental(&self, sent: &mut Self::Sent) -> Result<Vec<u8>, String>;
+
+    /// The message back from its bytes and what the receiver holds; an
+    /// error if the bytes are damaged or refer to something not held.
+    fn decode_incremental(bytes: &[u8], held: &mut Self::Held) -> Result<Self, String>;
+}
+
+/// Per-pair state of an [`Incremental`] codec, type-erased.
+pub(crate) type CodecState = Box<dyn Any + Send>;
+
+/// The type-erased [`Incremental`] codec of a message type (used by
+/// cluster runs).
+#[derive(Clone, Copy)]
+#[cfg_attr(not(feature = "cluster"), allow(dead_code))]
+pub(crate) struct IncrementalCodec {
+    pub(crate) new_sent: fn() -> CodecState,
+    pub(crate) new_held: fn() -> CodecState,
+    pub(crate) encode: fn(&(dyn Any + Send + Sync), &mut CodecState) -> Result<Vec<u8>, String>,
+    pub(crate) decode: fn(&[u8], &mut CodecState) -> Result<Payload, String>,
+}
+
 /// Run-time description of a stream's message type.
 ///
 /// Two `MessageType`s are equal when they describe the same Rust type.
@@ -36,6 +70,8 @@ pub struct MessageType {
     hash: fn(&(dyn Any + Send + Sync), &[&str]) -> Result<u64, FieldHashError>,
     encode: fn(&(dyn Any + Send + Sync)) -> Result<Vec<u8>, postcard::Error>,
     decode: fn(&[u8]) -> Result<Payload, postcard::Error>,
+    #[cfg_attr(not(feature = "cluster"), allow(dead_code))]
+    incremental: Option<IncrementalCodec>,
 }
 
 impl MessageType {
@@ -48,7 +84,27 @@ impl MessageType {
             hash: hash_payload::<T>,
             encode: encode_payload::<T>,
             decode: decode_payload::<T>,
+            incremental: None,
         }
+    }
+
+    /// The description of `T`, which crosses processes incrementally.
+    pub fn incremental<T: Incremental>() -> Self {
+        MessageType {
+            incremental: Some(IncrementalCodec {
+                new_sent: || Box::new(T::Sent::default()),
+                new_held: || Box::new(T::Held::default()),
+                encode: encode_incremental::<T>,
+                decode: decode_incremental::<T>,
+            }),
+            ..Self::of::<T>()
+        }
+    }
+
+    /// The incremental codec, if the type has one.
+    #[cfg_attr(not(feature = "cluster"), allow(dead_code))]
+    pub(crate) fn incremental_codec(&self) -> Option<IncrementalCodec> {
+        self.incremental
     }
 
     /// The Rust type name, for error messages.
@@ -129,6 +185,19 @@ fn encode_payload<T: Message>(payload: &(dyn Any + Send + Sync)) -> Result<Vec<u
 
 fn decode_payload<T: Message>(bytes: &[u8]) -> Result<Payload, postcard::Error> {
     Ok(Arc::new(postcard::from_bytes::<T>(bytes)?))
+}
+
+fn encode_incremental<T: Incremental>(
+    payload: &(dyn Any + Send + Sync),
+    sent: &mut CodecState,
+) -> Result<Vec<u8>, String> {
+    let sent = sent.downcast_mut::<T::Sent>().expect("the codec's own sender state");
+    downcast::<T>(payload).encode_incremental(sent)
+}
+
+fn decode_incremental<T: Incremental>(bytes: &[u8], held: &mut CodecState) -> Result<Payload, String> {
+    let held = held.downcast_mut::<T::Held>().expect("the codec's own receiver state");
+    Ok(Arc::new(T::decode_incremental(bytes, held)?))
 }
 
 #[cfg(test)]

@@ -242,7 +242,7 @@ impl<M: HostedModel> Bolt for Matcher<M> {
     fn declare(&self, d: &mut Declarer) {
         d.input::<Reading<M::Input>>()
             .input::<Decision>()
-            .peer::<Transfer<M::State>>()
+            .peer_message(M::transfer_message())
             .output::<Report>("report")
             .output::<M::Snapshot>("map");
     }

@@ -16,9 +16,10 @@ pub mod dispatcher;
 pub mod matcher;
 pub mod messages;
 pub mod resampler;
+mod slam_transfer;
 
 use squall_topology::{
-    Bolt, BoxError, Declarer, Emitter, Message, ParamError, Params, Registry, TaskContext, Tuple,
+    Bolt, BoxError, Declarer, Emitter, Message, MessageType, ParamError, Params, Registry, TaskContext, Tuple,
 };
 
 use crate::cgr::model::CgrModel;
@@ -48,6 +49,13 @@ pub trait HostedModel: ParticleModel<Input: Message, State: Message> + Sized {
     /// The snapshot of a particle.
     fn snapshot(&self, state: &Self::State) -> Self::Snapshot;
 
+    /// How transfers of states between matcher tasks are described; a
+    /// model whose states are large makes them cross processes
+    /// incrementally.
+    fn transfer_message() -> MessageType {
+        MessageType::of::<messages::Transfer<Self::State>>()
+    }
+
     /// Bytes the states take together (shared parts counted once).
     fn memory<'a>(&self, states: impl Iterator<Item = &'a Self::State>) -> u64
     where
@@ -66,6 +74,10 @@ impl HostedModel for SlamModel {
 
     fn snapshot(&self, state: &SlamParticle) -> OccupancyGrid {
         state.map.to_occupancy()
+    }
+
+    fn transfer_message() -> MessageType {
+        MessageType::incremental::<messages::Transfer<SlamParticle>>()
     }
 
     fn memory<'a>(&self, states: impl Iterator<Item = &'a SlamParticle>) -> u64 {

@@ -4,8 +4,14 @@
 //! only the tiles the receiver lacks, referring to the rest. Particles
 //! resampled from one parent share most of their tiles, and a map sent
 //! again after a reading differs only in the tiles the reading touched.
+//!
+//! Both records are bounded the same way: after each message (a
+//! [`Sent::end_message`] on one side, [`TileStore::end_message`] on the
+//! other), tiles not referred to in the last [`KEEP_MESSAGES`] messages are
+//! forgotten. Messages between one sender and one receiver arrive in
+//! order, so both sides forget the same tiles at the same message.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
@@ -52,10 +58,15 @@ pub enum UnpackError {
     Invalid(String),
 }
 
-/// What the sender knows each receiver holds.
+/// Messages a tile is remembered for after it was last referred to.
+pub const KEEP_MESSAGES: u64 = 4;
+
+/// What a sender knows one receiver holds: each digest with the message
+/// that last referred to it.
 #[derive(Debug, Default)]
 pub struct Sent {
-    held: HashSet<u128>,
+    held: HashMap<u128, u64>,
+    message: u64,
 }
 
 impl Sent {
@@ -63,24 +74,47 @@ impl Sent {
     pub fn forget(&mut self) {
         self.held.clear();
     }
+
+    /// Ends a message: forgets the tiles the receiver forgets now.
+    pub fn end_message(&mut self) {
+        self.message += 1;
+        let message = self.message;
+        self.held.retain(|_, last| *last + KEEP_MESSAGES > message);
+    }
+
+    /// Tiles remembered.
+    pub fn len(&self) -> usize {
+        self.held.len()
+    }
+
+    /// Whether no tile is remembered.
+    pub fn is_empty(&self) -> bool {
+        self.held.is_empty()
+    }
 }
 
 /// Packs `grid` for the receiver that `sent` describes, and records the
-/// tiles sent whole as held there.
+/// tiles it will hold.
 pub fn pack(grid: &TiledGrid, sent: &mut Sent) -> PackedGrid {
+    let message = sent.message;
     PackedGrid(GridWire::from(grid.clone()).map_tiles(|tile| match tile {
         None => PackedTile::Empty,
         Some(tile) => {
             let digest = tile.digest();
-            if sent.held.insert(digest) { PackedTile::Whole(tile) } else { PackedTile::Held(digest) }
+            match sent.held.insert(digest, message) {
+                None => PackedTile::Whole(tile),
+                Some(_) => PackedTile::Held(digest),
+            }
         }
     }))
 }
 
-/// The tiles a receiver holds, by digest: shared by every map it unpacks.
+/// The tiles a receiver holds from one sender, by digest, each with the
+/// message that last referred to it.
 #[derive(Debug, Default)]
 pub struct TileStore {
-    tiles: HashMap<u128, Arc<Tile>>,
+    tiles: HashMap<u128, (Arc<Tile>, u64)>,
+    message: u64,
 }
 
 impl TileStore {
@@ -89,20 +123,33 @@ impl TileStore {
         self.tiles.len()
     }
 
-    /// Whether nothing is held.
+    /// Whether no tile is held.
     pub fn is_empty(&self) -> bool {
         self.tiles.is_empty()
     }
 
-    /// Unpacks a map, keeping the tiles that came whole. The map is
-    /// checked as any map read from bytes is.
+    /// Ends a message: forgets what the sender forgets now.
+    pub fn end_message(&mut self) {
+        self.message += 1;
+        let message = self.message;
+        self.tiles.retain(|_, (_, last)| *last + KEEP_MESSAGES > message);
+    }
+
+    /// The map back from its packed form, keeping the tiles it brought.
     pub fn unpack(&mut self, packed: PackedGrid) -> Result<TiledGrid, UnpackError> {
+        let message = self.message;
         let wire = packed.0.try_map_tiles(|tile| match tile {
             PackedTile::Empty => Ok(None),
             PackedTile::Held(digest) => {
-                Ok(Some(self.tiles.get(&digest).cloned().ok_or(UnpackError::MissingTile(digest))?))
+                let (tile, last) = self.tiles.get_mut(&digest).ok_or(UnpackError::MissingTile(digest))?;
+                *last = message;
+                Ok(Some(tile.clone()))
             }
-            PackedTile::Whole(tile) => Ok(Some(self.tiles.entry(tile.digest()).or_insert(tile).clone())),
+            PackedTile::Whole(tile) => {
+                let entry = self.tiles.entry(tile.digest()).or_insert((tile, message));
+                entry.1 = message;
+                Ok(Some(entry.0.clone()))
+            }
         })?;
         TiledGrid::try_from(wire).map_err(UnpackError::Invalid)
     }
@@ -186,5 +233,29 @@ mod tests {
         *damaged.0.tiles.iter_mut().find(|t| matches!(t, PackedTile::Whole(_))).unwrap() =
             PackedTile::Whole(Arc::new(broken));
         assert!(matches!(TileStore::default().unpack(damaged), Err(UnpackError::Invalid(_))));
+    }
+
+    #[test]
+    fn sender_and_receiver_forget_the_same_tiles_at_the_same_message() {
+        let (mut sent, mut store) = (Sent::default(), TileStore::default());
+        let map = corridor();
+        let mut other = TiledGrid::new(0.05, (0.0, 0.0));
+        other.update((500, 500), |c| c.add_hit(25.0, 25.0));
+        let first = pack(&map, &mut sent);
+        let tiles = first.whole_tiles();
+        store.unpack(first).unwrap();
+        sent.end_message();
+        store.end_message();
+        // Messages that do not refer to the corridor's tiles: after
+        // KEEP_MESSAGES of them both sides have let them go.
+        for _ in 0..KEEP_MESSAGES {
+            store.unpack(pack(&other, &mut sent)).unwrap();
+            sent.end_message();
+            store.end_message();
+        }
+        assert_eq!((sent.len(), store.len()), (1, 1), "only the other map's tile is kept");
+        let again = pack(&map, &mut sent);
+        assert_eq!(again.whole_tiles(), tiles, "forgotten tiles are sent whole again");
+        assert!(same_cells(&store.unpack(again).unwrap(), &map));
     }
 }

@@ -33,6 +33,7 @@ use crate::cluster::run::layout::Layout;
 use crate::cluster::wire::{DEFAULT_MAX_FRAME, EdgeTraffic, Frame, Rejections};
 use crate::error::EmitError;
 use crate::grouping::OverflowPolicy;
+use crate::message::CodecState;
 use crate::runtime::local::queue::{EdgeQueue, Push};
 use crate::tuple::Tuple;
 
@@ -65,6 +66,9 @@ pub(crate) struct Link {
     traffic: Vec<EdgeCounters>,
     sent: AtomicU64,
     received: AtomicU64,
+    /// Receivers' records of incremental messages, by (edge, sending
+    /// task, receiving task).
+    held: Mutex<HashMap<(u32, u32, u32), CodecState>>,
     pub(crate) rejections: Rejections,
 }
 
@@ -105,6 +109,7 @@ impl Link {
             traffic,
             sent: AtomicU64::new(0),
             received: AtomicU64::new(0),
+            held: Mutex::new(HashMap::new()),
             rejections: Rejections::default(),
         })
     }
@@ -150,7 +155,8 @@ impl Link {
                 .insert((edge, from as u32, to as u32), credits.clone());
             credits
         });
-        RemoteTarget { link: self.clone(), host, edge, from: from as u32, to: to as u32, credits }
+        let sent = info.message.incremental_codec().map(|codec| Mutex::new((codec.new_sent)()));
+        RemoteTarget { link: self.clone(), host, edge, from: from as u32, to: to as u32, credits, sent }
     }
 
     /// Ends every wait for credits (the run is aborting).
@@ -205,7 +211,15 @@ impl Link {
             .get(&(edge, to))
             .ok_or_else(|| format!("task {to} of the consumer is not on this host"))?;
         let started = Instant::now();
-        let decoded = info.message.decode(payload).map_err(|e| format!("payload does not decode: {e}"));
+        let decoded = match info.message.incremental_codec() {
+            None => info.message.decode(payload).map_err(|e| e.to_string()),
+            Some(codec) => {
+                let mut held = self.held.lock().unwrap_or_else(|e| e.into_inner());
+                let state = held.entry((edge, from, to)).or_insert_with(codec.new_held);
+                (codec.decode)(payload, state)
+            }
+        }
+        .map_err(|e| format!("payload does not decode: {e}"));
         self.traffic[edge as usize].decode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
         let tuple = Tuple { source, payload: decoded?, anchor: None };
         forward.send((tuple, from)).map_err(|_| "the run is over".to_string())
@@ -223,6 +237,8 @@ pub(crate) struct RemoteTarget {
     to: u32,
     /// Room at the receiver, on a block edge.
     credits: Option<Arc<Semaphore>>,
+    /// What the receiver holds, for an incremental message type.
+    sent: Option<Mutex<CodecState>>,
 }
 
 impl RemoteTarget {
@@ -232,8 +248,14 @@ impl RemoteTarget {
         let info = &self.link.layout.edges[self.edge as usize];
         let counters = &self.link.traffic[self.edge as usize];
         let started = Instant::now();
-        let payload =
-            info.message.encode(&*tuple.payload).map_err(|e| EmitError::Transport(e.to_string()))?;
+        let payload = match &self.sent {
+            None => info.message.encode(&*tuple.payload).map_err(|e| e.to_string()),
+            Some(sent) => {
+                let codec = info.message.incremental_codec().expect("an incremental type");
+                (codec.encode)(&*tuple.payload, &mut sent.lock().unwrap_or_else(|e| e.into_inner()))
+            }
+        }
+        .map_err(EmitError::Transport)?;
         let frame = Frame::Tuple { edge: self.edge, from: self.from, to: self.to, payload }.encode();
         counters.encode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
         if let Some(credits) = &self.credits {
