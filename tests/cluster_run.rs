@@ -161,3 +161,38 @@ fn slam_with_three_matchers_on_three_workers_gives_the_in_process_run_byte_for_b
     let edges = m["edges"].as_array().unwrap();
     assert!(edges.iter().any(|e| e["stream"] == "peer"), "particle transfers crossed processes: {m}");
 }
+
+#[test]
+fn speedup_on_a_cluster_adds_worker_rows_with_their_traffic() {
+    let workers = Workers::start(2);
+    let cluster = workers.cluster_file("");
+    let out = tempfile::tempdir().unwrap();
+    let log = aces();
+    let done = squall(&[
+        "speedup",
+        "--log",
+        &log,
+        "--max-scans",
+        "200",
+        "--particles",
+        "10",
+        "--matchers",
+        "1,2",
+        "--out",
+        out.path().to_str().unwrap(),
+        "--cluster",
+        cluster.to_str().unwrap(),
+    ]);
+    assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+    let csv = std::fs::read_to_string(out.path().join("speedup.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    for row in &rows {
+        let (place, wire_bytes, identical) = (row[2], row[9].parse::<f64>().unwrap(), row[11]);
+        match place {
+            // Even one matcher runs on a worker: readings and reports cross.
+            "workers" => assert!(wire_bytes > 0.0 && identical == "true", "{csv}"),
+            _ => assert_eq!(wire_bytes, 0.0, "{csv}"),
+        }
+    }
+}

@@ -197,7 +197,10 @@ fn report_invalid(spec: Result<TopologySpec, SpecErrors>) -> Result<Topology, Ex
 }
 
 fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_env("SQUALL_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    // zenoh warns at every start that its scouting delay elapsed, although
+    // squall connects to explicit endpoints and does not scout.
+    let filter = tracing_subscriber::EnvFilter::try_from_env("SQUALL_LOG").unwrap_or_else(|_| {
+        tracing_subscriber::EnvFilter::new("warn,zenoh::net::runtime::orchestrator=error")
+    });
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
 }

@@ -1,7 +1,10 @@
 //! `squall speedup`: runs the SLAM topology for every (particles, matcher
 //! tasks) pair and reports how the time per processed scan scales with the
 //! matcher count (seed 003 Table 2 / Fig. 5): a table on stdout,
-//! `speedup.csv` and a plot `speedup.svg`.
+//! `speedup.csv` and a plot `speedup.svg`. With `--cluster`, every
+//! configuration also runs on the cluster's workers (matcher task i on
+//! worker i mod n), and the table adds the bytes and serialization time
+//! that crossed between processes.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -36,6 +39,9 @@ pub(super) struct SpeedupArgs {
     /// Output folder: speedup.csv, speedup.svg and one folder per run.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Also run every configuration on the workers of this cluster file.
+    #[arg(long, value_name = "CLUSTER.toml")]
+    cluster: Option<PathBuf>,
 }
 
 /// One configuration's figures.
@@ -43,6 +49,8 @@ pub(super) struct SpeedupArgs {
 struct Row {
     particles: u64,
     matchers: usize,
+    /// Run on a cluster's workers (else in one process).
+    on_cluster: bool,
     /// Median wall ms per processed scan.
     median_ms: f64,
     /// Mean of (slowest matcher task − mean task) per correction, ms.
@@ -51,6 +59,10 @@ struct Row {
     bytes_per_scan: f64,
     /// What round-robin placement would have moved per processed scan.
     naive_bytes_per_scan: f64,
+    /// Bytes that crossed between processes per processed scan.
+    wire_bytes_per_scan: f64,
+    /// Serialization (both ends) per processed scan, ms.
+    serialize_ms_per_scan: f64,
     /// Whether trajectory.tum equals the one-matcher run's.
     identical: Option<bool>,
 }
@@ -78,7 +90,7 @@ fn total(c: &ComponentReport, name: &str) -> f64 {
     values(c, name).map_or(0.0, |(n, mean, _)| n as f64 * mean)
 }
 
-fn row_of(report: &RunReport, particles: u64, matchers: usize) -> Result<Row, String> {
+fn row_of(report: &RunReport, particles: u64, matchers: usize, on_cluster: bool) -> Result<Row, String> {
     let missing = |what: &str| format!("the run's metrics lack {what} (is this the SLAM topology?)");
     let dispatcher = component(report, "dispatcher").ok_or_else(|| missing("the dispatcher"))?;
     let resampler = component(report, "resampler").ok_or_else(|| missing("the resampler"))?;
@@ -86,9 +98,14 @@ fn row_of(report: &RunReport, particles: u64, matchers: usize) -> Result<Row, St
         values(dispatcher, "processed_scan_us").ok_or_else(|| missing("processed_scan_us"))?;
     let processed = counter(resampler, "processed_scans").ok_or_else(|| missing("processed_scans"))?.max(1);
     let corrections = values(resampler, "imbalance_us").map_or(0, |v| v.0).max(1);
+    let wire_bytes: u64 = report.edges.iter().map(|e| e.bytes).sum();
+    let serialize_ms = report.edges.iter().fold(0.0, |sum, e| sum + e.encode_ms + e.decode_ms);
     Ok(Row {
         particles,
         matchers,
+        on_cluster,
+        wire_bytes_per_scan: wire_bytes as f64 / processed as f64,
+        serialize_ms_per_scan: serialize_ms / processed as f64,
         median_ms: p50_us as f64 / 1e3,
         imbalance_ms: total(resampler, "imbalance_us") / corrections as f64 / 1e3,
         bytes_per_scan: total(resampler, "bytes_moved") / processed as f64,
@@ -109,48 +126,28 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
     let mut rows = Vec::new();
     for &particles in &args.particles {
         for &k in &matchers {
-            let dir = args.out.join(format!("p{particles}-k{k}"));
-            let slam = SlamArgs {
-                cluster: None,
-                log: args.log.clone(),
-                particles: Some(particles),
-                cutoff: args.cutoff.clone(),
-                matchers: k,
-                max_scans: args.max_scans,
-                seed: args.seed,
-                topology: None,
-                overrides: Vec::new(),
-                out: dir.clone(),
-            };
-            let topology = match super::slam::topology(&slam) {
-                Ok(t) => t,
-                Err(code) => return code,
-            };
-            let options = RunOptions { out_dir: Some(dir.clone()), ..RunOptions::default() };
-            let report = match squall_topology::run(&topology, &options) {
-                Ok(r) => r,
-                Err(e) => {
-                    eprintln!("error: {particles} particles, {k} matchers: {e}");
-                    return ExitCode::from(EXIT_FAILED);
+            let places: &[bool] = if args.cluster.is_some() { &[false, true] } else { &[false] };
+            for &on_cluster in places {
+                let name = format!("p{particles}-k{k}{}", if on_cluster { "-cluster" } else { "" });
+                let dir = args.out.join(name);
+                let mut row = match run_one(args, particles, k, on_cluster, &dir) {
+                    Ok(row) => row,
+                    Err((code, e)) => {
+                        eprintln!("error: {particles} particles, {k} matchers: {e}");
+                        return ExitCode::from(code);
+                    }
+                };
+                let baseline = args.out.join(format!("p{particles}-k{}", matchers[0])).join("trajectory.tum");
+                if k != matchers[0] || on_cluster {
+                    row.identical = Some(same_file(&baseline, &dir.join("trajectory.tum")));
                 }
-            };
-            if let Err(e) = write_atomic(&dir.join("metrics.json"), report.to_json().as_bytes()) {
-                eprintln!("error: cannot write {}: {e}", dir.join("metrics.json").display());
-                return ExitCode::from(EXIT_FAILED);
+                eprintln!(
+                    "{particles} particles, {k} matchers{}: {:.2} ms per processed scan",
+                    if on_cluster { " on the cluster" } else { "" },
+                    row.median_ms
+                );
+                rows.push(row);
             }
-            let mut row = match row_of(&report, particles, k) {
-                Ok(r) => r,
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    return ExitCode::from(EXIT_FAILED);
-                }
-            };
-            let baseline = args.out.join(format!("p{particles}-k{}", matchers[0])).join("trajectory.tum");
-            if k != matchers[0] {
-                row.identical = Some(same_file(&baseline, &dir.join("trajectory.tum")));
-            }
-            eprintln!("{particles} particles, {k} matchers: {:.2} ms per processed scan", row.median_ms);
-            rows.push(row);
         }
     }
     let table = table(&rows, matchers[0]);
@@ -168,13 +165,77 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// Runs one configuration into `dir` and measures it.
+fn run_one(
+    args: &SpeedupArgs,
+    particles: u64,
+    k: usize,
+    on_cluster: bool,
+    dir: &Path,
+) -> Result<Row, (u8, String)> {
+    let failed = |e: String| (EXIT_FAILED, e);
+    let slam = SlamArgs {
+        cluster: None,
+        log: args.log.clone(),
+        particles: Some(particles),
+        cutoff: args.cutoff.clone(),
+        matchers: k,
+        max_scans: args.max_scans,
+        seed: args.seed,
+        topology: None,
+        overrides: Vec::new(),
+        out: dir.to_path_buf(),
+    };
+    let topology =
+        super::slam::topology(&slam).map_err(|_| (EXIT_INVALID, "invalid configuration".to_string()))?;
+    let options = RunOptions { out_dir: Some(dir.to_path_buf()), ..RunOptions::default() };
+    let report = match (&args.cluster, on_cluster) {
+        (Some(file), true) => run_on_cluster(&topology, file, &options)?,
+        _ => squall_topology::run(&topology, &options).map_err(|e| failed(e.to_string()))?,
+    };
+    write_atomic(&dir.join("metrics.json"), report.to_json().as_bytes())
+        .map_err(|e| failed(format!("cannot write {}: {e}", dir.join("metrics.json").display())))?;
+    row_of(&report, particles, k, on_cluster).map_err(failed)
+}
+
+#[cfg(feature = "cluster")]
+fn run_on_cluster(
+    topology: &squall_topology::Topology,
+    file: &Path,
+    options: &RunOptions,
+) -> Result<RunReport, (u8, String)> {
+    use squall_topology::cluster::config::{ClusterSpec, Host};
+    let mut cluster = ClusterSpec::load(file).map_err(|e| (EXIT_INVALID, e.to_string()))?;
+    // The matchers go to the workers even when there is one of them (the
+    // default would keep a single task with the coordinator).
+    if !cluster.placement.contains_key("matcher") {
+        let k = topology.spec().component("matcher").map_or(1, |c| c.parallelism);
+        let workers = (0..k).map(|i| Host::Worker(i % cluster.workers.len())).collect();
+        cluster.placement.insert("matcher".into(), workers);
+    }
+    squall_topology::cluster::run::run_on_cluster(topology, &cluster, options)
+        .map_err(|e| (EXIT_FAILED, e.to_string()))
+}
+
+#[cfg(not(feature = "cluster"))]
+fn run_on_cluster(
+    _: &squall_topology::Topology,
+    _: &Path,
+    _: &RunOptions,
+) -> Result<RunReport, (u8, String)> {
+    Err((
+        EXIT_INVALID,
+        "--cluster needs cluster mode: this squall was built without the `cluster` feature".into(),
+    ))
+}
+
 fn same_file(a: &Path, b: &Path) -> bool {
     matches!((std::fs::read(a), std::fs::read(b)), (Ok(x), Ok(y)) if x == y)
 }
 
 /// The baseline row's time for `particles`.
 fn baseline(rows: &[Row], particles: u64, base: usize) -> Option<f64> {
-    rows.iter().find(|r| r.particles == particles && r.matchers == base).map(|r| r.median_ms)
+    rows.iter().find(|r| r.particles == particles && r.matchers == base && !r.on_cluster).map(|r| r.median_ms)
 }
 
 /// (speedup T_base / T_K, efficiency speedup × base / K).
@@ -187,15 +248,18 @@ fn table(rows: &[Row], base: usize) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "{:>9} {:>8} {:>10} {:>8} {:>10} {:>13} {:>14} {:>15} {:>9}",
+        "{:>9} {:>8} {:>8} {:>10} {:>8} {:>10} {:>13} {:>14} {:>15} {:>12} {:>11} {:>9}",
         "particles",
         "matchers",
+        "where",
         "median ms",
         "speedup",
         "efficiency",
         "imbalance ms",
         "bytes/scan",
         "round-robin b/s",
+        "wire b/scan",
+        "serde ms/sc",
         "same"
     );
     for r in rows {
@@ -207,15 +271,18 @@ fn table(rows: &[Row], base: usize) -> String {
         };
         let _ = writeln!(
             t,
-            "{:>9} {:>8} {:>10.2} {:>8.2} {:>10.2} {:>13.3} {:>14.0} {:>15.0} {:>9}",
+            "{:>9} {:>8} {:>8} {:>10.2} {:>8.2} {:>10.2} {:>13.3} {:>14.0} {:>15.0} {:>12.0} {:>11.3} {:>9}",
             r.particles,
             r.matchers,
+            if r.on_cluster { "workers" } else { "process" },
             r.median_ms,
             s,
             e,
             r.imbalance_ms,
             r.bytes_per_scan,
             r.naive_bytes_per_scan,
+            r.wire_bytes_per_scan,
+            r.serialize_ms_per_scan,
             same
         );
     }
@@ -224,22 +291,25 @@ fn table(rows: &[Row], base: usize) -> String {
 
 fn csv(rows: &[Row], base: usize) -> String {
     let mut t = String::from(
-        "particles,matchers,median_ms,speedup,efficiency,imbalance_ms,bytes_moved_per_scan,round_robin_bytes_per_scan,identical\n",
+        "particles,matchers,where,median_ms,speedup,efficiency,imbalance_ms,bytes_moved_per_scan,round_robin_bytes_per_scan,wire_bytes_per_scan,serialize_ms_per_scan,identical\n",
     );
     for r in rows {
         let (s, e) = scaling(rows, r, base);
         let same = r.identical.map_or(String::new(), |b| b.to_string());
         let _ = writeln!(
             t,
-            "{},{},{:.4},{:.4},{:.4},{:.4},{:.1},{:.1},{same}",
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.1},{:.1},{:.1},{:.4},{same}",
             r.particles,
             r.matchers,
+            if r.on_cluster { "workers" } else { "process" },
             r.median_ms,
             s,
             e,
             r.imbalance_ms,
             r.bytes_per_scan,
-            r.naive_bytes_per_scan
+            r.naive_bytes_per_scan,
+            r.wire_bytes_per_scan,
+            r.serialize_ms_per_scan
         );
     }
     t
@@ -299,13 +369,14 @@ fn svg(rows: &[Row], base: usize) -> String {
         x(k_max),
         y(k_max)
     );
-    let mut particle_counts: Vec<u64> = rows.iter().map(|r| r.particles).collect();
+    let mut particle_counts: Vec<(u64, bool)> = rows.iter().map(|r| (r.particles, r.on_cluster)).collect();
+    particle_counts.sort_unstable();
     particle_counts.dedup();
-    for (i, p) in particle_counts.iter().enumerate() {
+    for (i, (p, on_cluster)) in particle_counts.iter().enumerate() {
         let colour = COLOURS[i % COLOURS.len()];
         let points: Vec<String> = rows
             .iter()
-            .filter(|r| r.particles == *p)
+            .filter(|r| r.particles == *p && r.on_cluster == *on_cluster)
             .map(|r| (r.matchers as f64, scaling(rows, r, base).0))
             .filter(|(_, s)| s.is_finite())
             .map(|(k, s)| format!("{:.1},{:.1}", x(k), y(s)))
@@ -317,9 +388,10 @@ fn svg(rows: &[Row], base: usize) -> String {
         );
         let _ = writeln!(
             t,
-            "<text x=\"{}\" y=\"{}\" fill=\"{colour}\">{p} particles</text>",
+            "<text x=\"{}\" y=\"{}\" fill=\"{colour}\">{p} particles{}</text>",
             margin + 10.0,
-            margin + 16.0 * i as f64
+            margin + 16.0 * i as f64,
+            if *on_cluster { ", workers" } else { "" },
         );
     }
     let _ = writeln!(
