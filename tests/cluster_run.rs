@@ -188,11 +188,77 @@ fn speedup_on_a_cluster_adds_worker_rows_with_their_traffic() {
     let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 4, "{csv}");
     for row in &rows {
-        let (place, wire_bytes, identical) = (row[2], row[9].parse::<f64>().unwrap(), row[11]);
+        let (identical, place, wire_bytes) = (row[8], row[9], row[10].parse::<f64>().unwrap());
         match place {
             // Even one matcher runs on a worker: readings and reports cross.
             "workers" => assert!(wire_bytes > 0.0 && identical == "true", "{csv}"),
             _ => assert_eq!(wire_bytes, 0.0, "{csv}"),
         }
     }
+}
+
+/// `squall run` on the probe topology, 3000 probes at 1 kHz (3 s), on
+/// `cluster`, started in the background.
+fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_squall"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["run", "examples/topologies/probe.toml", "--quiet"])
+        .args(["--set", "source.params.count=3000", "--set", "source.params.rate_hz=1000"])
+        .args(["--set", &format!("relay.parallelism={relays}")])
+        .args(["--out", out.to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+#[test]
+fn a_lost_worker_s_tasks_move_to_a_survivor_and_the_run_completes() {
+    let mut workers = Workers::start(2);
+    let cluster = workers.cluster_file("relay = [\"w1\", \"w2\"]");
+    let out = tempfile::tempdir().unwrap();
+    let run = slow_probe_run(&cluster, out.path(), 2);
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    workers.children[1].kill().unwrap();
+    let done = run.wait_with_output().unwrap();
+    assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+    let m = metrics(out.path());
+    let warnings: Vec<&str> = m["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    let warnings = warnings.join("\n");
+    assert!(warnings.contains("worker \"w2\" was lost") && warnings.contains("relay 1 → w1"), "{warnings}");
+    // Probes kept flowing through both relay tasks after the loss: at most
+    // the few in flight to w2 when it died are missing.
+    let received = component(&m, "sink")["received"].as_u64().unwrap();
+    assert!((2900..=3000).contains(&received), "{received} of 3000 probes arrived");
+    let log = workers.wait_for_log(0, "ran 2 tasks of \"probe\"");
+    assert!(log.contains("took over task 1") && log.contains("ran 2 tasks of \"probe\""), "{log}");
+}
+
+#[test]
+fn a_killed_coordinator_leaves_no_worker_running() {
+    let mut workers = Workers::start(1);
+    let cluster = workers.cluster_file("relay = [\"w1\"]");
+    let out = tempfile::tempdir().unwrap();
+    let mut run = slow_probe_run(&cluster, out.path(), 1);
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    run.kill().unwrap();
+    let _ = run.wait();
+    let killed = std::time::Instant::now();
+    let deadline = killed + std::time::Duration::from_secs(5);
+    let exited = loop {
+        if let Some(status) = workers.children[0].try_wait().unwrap() {
+            break Some(status);
+        }
+        if std::time::Instant::now() > deadline {
+            break None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    assert!(
+        exited.is_some(),
+        "the worker still runs 5 s after its coordinator was killed: {}",
+        workers.log(0)
+    );
+    eprintln!("worker exited {:.2} s after its coordinator was killed", killed.elapsed().as_secs_f64());
+    assert!(workers.log(0).contains("the coordinator is gone"), "{}", workers.log(0));
 }

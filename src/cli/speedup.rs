@@ -291,23 +291,23 @@ fn table(rows: &[Row], base: usize) -> String {
 
 fn csv(rows: &[Row], base: usize) -> String {
     let mut t = String::from(
-        "particles,matchers,where,median_ms,speedup,efficiency,imbalance_ms,bytes_moved_per_scan,round_robin_bytes_per_scan,wire_bytes_per_scan,serialize_ms_per_scan,identical\n",
+        "particles,matchers,median_ms,speedup,efficiency,imbalance_ms,bytes_moved_per_scan,round_robin_bytes_per_scan,identical,where,wire_bytes_per_scan,serialize_ms_per_scan\n",
     );
     for r in rows {
         let (s, e) = scaling(rows, r, base);
         let same = r.identical.map_or(String::new(), |b| b.to_string());
         let _ = writeln!(
             t,
-            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.1},{:.1},{:.1},{:.4},{same}",
+            "{},{},{:.4},{:.4},{:.4},{:.4},{:.1},{:.1},{same},{},{:.1},{:.4}",
             r.particles,
             r.matchers,
-            if r.on_cluster { "workers" } else { "process" },
             r.median_ms,
             s,
             e,
             r.imbalance_ms,
             r.bytes_per_scan,
             r.naive_bytes_per_scan,
+            if r.on_cluster { "workers" } else { "process" },
             r.wire_bytes_per_scan,
             r.serialize_ms_per_scan
         );

@@ -16,6 +16,7 @@ pub struct TaskContext {
     pub(crate) seed: u64,
     pub(crate) out_dir: Option<Arc<PathBuf>>,
     pub(crate) progress: Option<Arc<Progress>>,
+    pub(crate) replacement: bool,
 }
 
 impl TaskContext {
@@ -44,6 +45,12 @@ impl TaskContext {
     /// do not depend on parallelism.
     pub fn seed(&self) -> u64 {
         self.seed
+    }
+
+    /// Whether this task replaces one that was lost with its process
+    /// (cluster mode): it starts without the state its predecessor had.
+    pub fn is_replacement(&self) -> bool {
+        self.replacement
     }
 
     /// The run's output directory, when one was given.

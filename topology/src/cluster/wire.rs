@@ -22,6 +22,8 @@ pub enum Frame {
     /// A tuple on an edge of the topology, from one task of the producer
     /// to one task of the consumer.
     Tuple {
+        /// The sending process's host number.
+        sender: u16,
         /// The edge, by its index in the plan all processes share (a
         /// consumer's inputs in file order, then its peer messages).
         edge: u32,
@@ -62,6 +64,8 @@ pub struct RunPlan {
     pub hosts: Vec<Vec<u16>>,
     /// The host number of the worker this is sent to.
     pub host: u16,
+    /// Hosts in the run (the coordinator and every worker of the file).
+    pub host_count: u16,
     /// The coordinator's id, as in its liveliness token: once the run is
     /// over (collected or refused) the worker outlives this coordinator.
     pub coordinator: String,
@@ -155,19 +159,32 @@ pub enum Control {
         /// Matches the answer.
         nonce: u64,
     },
-    /// A host's tuples accepted and resolved so far (queues, and tuples
-    /// sent and received over links), and whether a tick is running.
+    /// A host's tuples accepted and resolved by its queues so far, the
+    /// tuples it sent to and received from each host, and whether a tick
+    /// is running.
     Totals {
         /// The question's nonce.
         nonce: u64,
         /// The answering host.
         host: u16,
-        /// Accepted into queues plus sent to other processes.
+        /// Accepted into queues.
         accepted: u64,
-        /// Resolved by queues plus received from other processes.
+        /// Resolved by queues.
         resolved: u64,
+        /// Tuples sent to each host.
+        sent_to: Vec<u64>,
+        /// Tuples received from each host.
+        received_from: Vec<u64>,
         /// A task is inside `tick`.
         ticking: bool,
+    },
+    /// A host was lost: its tasks now run where `moves` says (component,
+    /// task, host).
+    Reassign {
+        /// The lost host.
+        lost: u16,
+        /// Where each of its tasks runs now.
+        moves: Vec<(u32, u32, u16)>,
     },
     /// A task on a worker reports.
     Event {
@@ -285,8 +302,9 @@ mod tests {
 
     fn samples() -> Vec<Frame> {
         vec![
-            Frame::Tuple { edge: 3, from: 0, to: 1, payload: vec![1, 2, 3] },
-            Frame::Tuple { edge: 2, from: 0, to: 2, payload: vec![9; 1000] },
+            Frame::Tuple { sender: 1, edge: 3, from: 0, to: 1, payload: vec![1, 2, 3] },
+            Frame::Tuple { sender: 0, edge: 2, from: 0, to: 2, payload: vec![9; 1000] },
+            Frame::Control(Control::Reassign { lost: 2, moves: vec![(3, 1, 1)] }),
             Frame::Credit { edge: 2, from: 1, to: 0, n: 3 },
             Frame::Control(Control::Advance { component: 2, stage: 3 }),
             Frame::Control(Control::Event { component: 1, task: 0, event: TaskEvent::Failed("x".into()) }),
@@ -305,7 +323,7 @@ mod tests {
 
     #[test]
     fn oversized_foreign_old_and_padded_frames_are_refused() {
-        let bytes = Frame::Tuple { edge: 0, from: 0, to: 1, payload: vec![0; 5000] }.encode();
+        let bytes = Frame::Tuple { sender: 0, edge: 0, from: 0, to: 1, payload: vec![0; 5000] }.encode();
         assert_eq!(Frame::decode(&bytes, 4096), Err(WireError::TooLarge { len: bytes.len(), max: 4096 }));
         assert_eq!(Frame::decode(b"GET / HTTP/1.1", DEFAULT_MAX_FRAME), Err(WireError::NotAFrame));
         assert_eq!(Frame::decode(b"SQ", DEFAULT_MAX_FRAME), Err(WireError::NotAFrame));

@@ -20,6 +20,7 @@ use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, EdgeTraffic, Frame, RunPl
 use crate::metrics::{EdgeReport, RunReport, TaskOutcome};
 use crate::plan::Topology;
 use crate::runtime::local::control::{Event, EventKind, Stage};
+
 use crate::runtime::local::coordinator::{Coordinator, Hosts};
 use crate::runtime::local::{RunError, RunOptions, build_report, finish_run, lost_outcome};
 
@@ -48,12 +49,15 @@ fn setup(message: impl std::fmt::Display) -> ClusterRunError {
     ClusterRunError::Setup(message.to_string())
 }
 
+/// A host's queue totals and its tuples sent to and received from each host.
+type HostTotals = (u64, u64, Vec<u64>, Vec<u64>);
+
 /// What workers send up during a run, besides task events.
 enum Up {
     Totals {
         nonce: u64,
         host: u16,
-        totals: Option<(u64, u64)>,
+        totals: Option<HostTotals>,
     },
     Outcomes {
         host: u16,
@@ -115,6 +119,7 @@ fn coordinate(
         topology: topology.spec().text().to_string(),
         hosts: hosts.clone(),
         host,
+        host_count: host_count as u16,
         coordinator: session::coordinator_id(session),
     };
     let reports = {
@@ -132,8 +137,16 @@ fn coordinate(
                     let _ =
                         events_tx.send(Event { component: component as usize, task: task as usize, kind });
                 }
-                Ok(Frame::Control(Control::Totals { nonce, host, accepted, resolved, ticking })) => {
-                    let totals = (!ticking).then_some((accepted, resolved));
+                Ok(Frame::Control(Control::Totals {
+                    nonce,
+                    host,
+                    accepted,
+                    resolved,
+                    sent_to,
+                    received_from,
+                    ticking,
+                })) => {
+                    let totals = (!ticking).then_some((accepted, resolved, sent_to, received_from));
                     let _ = up_tx.send(Up::Totals { nonce, host, totals });
                 }
                 Ok(Frame::Control(Control::Outcomes { host, tasks, edges, refused })) => {
@@ -145,26 +158,36 @@ fn coordinate(
             .wait()
             .map_err(setup)?
     };
-    let mut local = HostRun::build(topology, layout.clone(), session, &run, 0, options).map_err(setup)?;
+    let mut local =
+        HostRun::build(topology, layout.clone(), session, &run, (0, host_count), options).map_err(setup)?;
     start_workers(cluster, session, &plan)?;
     let control = plan(0).control_key();
     put(session, &control, Control::Go).map_err(setup)?;
     let started = Instant::now();
     local.start(topology, options, &events_tx).map_err(|e| setup(format!("cannot start tasks: {e}")))?;
-    watch_for_lost_workers(io, session, cluster, &layout, events_tx.clone())?;
-    drop(events_tx);
+    watch_for_lost_workers(io, session, cluster, events_tx.clone())?;
     let workers: Vec<u16> = (1..host_count as u16).collect();
     let mut hosts_view = ClusterHosts {
-        local: &local,
+        local: &mut local,
+        topology,
+        options,
+        cluster,
+        events: events_tx,
         session,
         control: control.clone(),
         up: &up,
         workers,
+        lost: Vec::new(),
+        started,
+        warnings: Vec::new(),
         stash: Vec::new(),
         next_nonce: 1,
     };
     let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options.abort_grace);
     let stash = std::mem::take(&mut hosts_view.stash);
+    let lost = std::mem::take(&mut hosts_view.lost);
+    let mut warnings = std::mem::take(&mut hosts_view.warnings);
+    drop(hosts_view);
     put(session, &control, Control::Collect).map_err(setup)?;
     let mut outcomes: Vec<Vec<Option<TaskOutcome>>> =
         topology.components.iter().map(|c| vec![None; c.spec.parallelism]).collect();
@@ -182,9 +205,8 @@ fn coordinate(
         }
     };
     merge(local.link.traffic());
-    let mut warnings = Vec::new();
     let mut refused = local.link.rejections.totals();
-    let mut missing: Vec<u16> = (1..host_count as u16).collect();
+    let mut missing: Vec<u16> = (1..host_count as u16).filter(|h| !lost.contains(h)).collect();
     let deadline = Instant::now() + COLLECT;
     let mut pending = stash.into_iter();
     while !missing.is_empty() {
@@ -221,7 +243,7 @@ fn coordinate(
         .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
         .collect();
     let mut report = build_report(topology, &outcomes, started.elapsed());
-    report.warnings.extend(warnings);
+    report.warnings.append(&mut warnings);
     if refused.0 + refused.1 > 0 {
         report.warnings.push(format!(
             "frames refused between processes: {} over the size limit, {} malformed",
@@ -256,8 +278,9 @@ fn placement(topology: &Topology, cluster: &ClusterSpec) -> Result<Vec<Vec<u16>>
 /// Acking trees do not yet span processes: a topology with acking must
 /// keep every task in one process.
 fn refuse_acking_across_hosts(topology: &Topology, layout: &Layout) -> Result<(), ClusterRunError> {
-    let first = layout.hosts.iter().flatten().next().copied().unwrap_or(0);
-    let one_host = layout.hosts.iter().flatten().all(|&h| h == first);
+    let hosts = layout.hosts();
+    let first = hosts.iter().flatten().next().copied().unwrap_or(0);
+    let one_host = hosts.iter().flatten().all(|&h| h == first);
     match topology.components.iter().find(|c| c.spec.ack.is_some()) {
         Some(c) if !one_host => Err(setup(format!(
             "spout \"{}\" tracks its tuples (ack), which cluster mode does not support across processes yet: \
@@ -304,43 +327,19 @@ fn start_workers(
     Ok(())
 }
 
-/// Turns the loss of a worker hosting tasks into a task failure.
+/// Reports the loss of a worker of the run to the shutdown protocol.
 fn watch_for_lost_workers(
     io: &tokio::runtime::Runtime,
     session: &Session,
     cluster: &ClusterSpec,
-    layout: &Layout,
     events: mpsc::Sender<Event>,
 ) -> Result<(), ClusterRunError> {
     let mut tokens = io.block_on(session::watch_workers(session)).map_err(setup)?;
-    // (worker key, name, the first of its tasks)
-    type Watched = (String, String, Option<(usize, usize)>);
-    let watched: Vec<Watched> = cluster
-        .workers
-        .iter()
-        .enumerate()
-        .map(|(w, spec)| {
-            let host = w as u16 + 1;
-            let first = layout
-                .hosts
-                .iter()
-                .enumerate()
-                .find_map(|(c, tasks)| tasks.iter().position(|&h| h == host).map(|t| (c, t)));
-            (worker_key(&spec.endpoint), spec.name.clone(), first)
-        })
-        .collect();
+    let keys: Vec<String> = cluster.workers.iter().map(|w| worker_key(&w.endpoint)).collect();
     io.spawn(async move {
         while let Some((key, alive)) = tokens.recv().await {
-            if alive {
-                continue;
-            }
-            for (watched_key, name, first) in &watched {
-                if *watched_key == key
-                    && let Some((component, task)) = *first
-                {
-                    let message = format!("failed: its worker \"{name}\" is gone");
-                    let _ = events.send(Event { component, task, kind: EventKind::Failed(message) });
-                }
+            if let (false, Some(w)) = (alive, keys.iter().position(|k| *k == key)) {
+                let _ = events.send(Event { component: 0, task: 0, kind: EventKind::HostLost(w as u16 + 1) });
             }
         }
     });
@@ -349,15 +348,40 @@ fn watch_for_lost_workers(
 
 /// The run's hosts as the shutdown protocol sees them.
 struct ClusterHosts<'a> {
-    local: &'a HostRun,
+    local: &'a mut HostRun,
+    topology: &'a Topology,
+    options: &'a RunOptions,
+    cluster: &'a ClusterSpec,
+    /// For the tasks that move to the coordinator's process.
+    events: mpsc::Sender<Event>,
     session: &'a Session,
     control: String,
     up: &'a mpsc::Receiver<Up>,
+    /// Workers still in the run.
     workers: Vec<u16>,
+    /// Workers lost.
+    lost: Vec<u16>,
+    started: Instant,
+    warnings: Vec<String>,
     /// Reports that came while waiting for totals (outcomes of workers
     /// done early).
     stash: Vec<Up>,
     next_nonce: u64,
+}
+
+impl ClusterHosts<'_> {
+    fn name(&self, host: u16) -> &str {
+        self.cluster.workers.get(usize::from(host).wrapping_sub(1)).map_or("coordinator", |w| &w.name)
+    }
+
+    /// Adds one host's totals: its queues, and its traffic with the hosts
+    /// still in the run (what went to or came from a lost one is gone).
+    fn add(&self, sum: &mut (u64, u64), (accepted, resolved, sent_to, received_from): HostTotals) {
+        let live = |h: &usize| !self.lost.contains(&(*h as u16));
+        let over = |v: &[u64]| v.iter().enumerate().filter(|(h, _)| live(h)).map(|(_, n)| n).sum::<u64>();
+        sum.0 += accepted + over(&sent_to);
+        sum.1 += resolved + over(&received_from);
+    }
 }
 
 impl Hosts for &mut ClusterHosts<'_> {
@@ -370,7 +394,9 @@ impl Hosts for &mut ClusterHosts<'_> {
     }
 
     fn totals(&mut self) -> Option<(u64, u64)> {
-        let (mut accepted, mut resolved) = self.local.totals()?;
+        let mut sum = (0, 0);
+        let local = self.local.totals()?;
+        self.add(&mut sum, local);
         let nonce = self.next_nonce;
         self.next_nonce += 1;
         put(self.session, &self.control, Control::Status { nonce }).ok()?;
@@ -378,23 +404,69 @@ impl Hosts for &mut ClusterHosts<'_> {
         let deadline = Instant::now() + STATUS;
         while !waiting.is_empty() {
             match self.up.recv_timeout(deadline.saturating_duration_since(Instant::now())).ok()? {
-                Up::Totals { nonce: n, host, totals } if n == nonce => {
-                    let (a, r) = totals?;
+                Up::Totals { nonce: n, host, totals } if n == nonce && waiting.contains(&host) => {
                     waiting.retain(|&h| h != host);
-                    accepted += a;
-                    resolved += r;
+                    self.add(&mut sum, totals?);
                 }
                 Up::Totals { .. } => {}
                 other => self.stash.push(other),
             }
         }
-        Some((accepted, resolved))
+        Some(sum)
     }
 
     fn abort(&mut self) {
-        for c in 0..self.local.layout.hosts.len() {
+        for c in 0..self.topology.components.len() {
             self.advance(c, Stage::Abort);
         }
+    }
+
+    fn recover(&mut self, host: u16, running: bool) -> Result<(), String> {
+        if self.lost.contains(&host) || !self.workers.contains(&host) {
+            return Ok(());
+        }
+        let name = self.name(host).to_string();
+        if !running {
+            return Err(format!("failed: its worker \"{name}\" was lost while the run was ending"));
+        }
+        let hosts = self.local.layout.hosts();
+        let tasks: Vec<(usize, usize)> = hosts
+            .iter()
+            .enumerate()
+            .flat_map(|(c, on)| on.iter().enumerate().filter(|(_, h)| **h == host).map(move |(t, _)| (c, t)))
+            .collect();
+        if let Some(&(c, _)) =
+            tasks.iter().find(|(c, _)| self.topology.components[*c].spec.role == crate::spec::Role::Spout)
+        {
+            let spout = &self.topology.components[c].spec.name;
+            return Err(format!(
+                "failed: its worker \"{name}\" was lost, with spout \"{spout}\", whose place in its source is lost too"
+            ));
+        }
+        self.workers.retain(|&h| h != host);
+        self.lost.push(host);
+        // Survivors take the tasks in turn; with none left, the coordinator.
+        let survivors = if self.workers.is_empty() { vec![0] } else { self.workers.clone() };
+        let moves: Vec<(usize, usize, u16)> =
+            tasks.iter().enumerate().map(|(i, &(c, t))| (c, t, survivors[i % survivors.len()])).collect();
+        let wire = moves.iter().map(|&(c, t, h)| (c as u32, t as u32, h)).collect();
+        put(self.session, &self.control, Control::Reassign { lost: host, moves: wire })?;
+        self.local
+            .reassign(self.topology, self.options, &self.events, &moves)
+            .map_err(|e| format!("cannot start a task moved to the coordinator: {e}"))?;
+        let placed: Vec<String> = moves
+            .iter()
+            .map(|&(c, t, h)| format!("{} {t} → {}", self.topology.components[c].spec.name, self.name(h)))
+            .collect();
+        let message = format!(
+            "worker \"{name}\" was lost {:.1} s into the run; its {} tasks moved: {}",
+            self.started.elapsed().as_secs_f64(),
+            moves.len(),
+            placed.join(", ")
+        );
+        tracing::warn!("{message}");
+        self.warnings.push(message);
+        Ok(())
     }
 }
 

@@ -1,6 +1,8 @@
 //! One process's share of a cluster run: its tasks, their queues, and its
 //! links to the other processes. The coordinator and every worker each
-//! hold one.
+//! hold one. When a worker is lost, every host applies the same moves; the
+//! host a task moves to starts a fresh instance of it (a replacement, as
+//! after a restart), routed by where every task is now.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -18,16 +20,28 @@ use crate::runtime::local::target::Target;
 use crate::runtime::local::wiring::{Hop, Wiring};
 use crate::runtime::local::{RunOptions, TaskThreads, io_runtime, join_tasks, spawn_tasks};
 
+/// Where task t of component c's tuples to each consumer go, from this
+/// host: a link target unless the consumer is here too.
+fn elsewhere(link: &Arc<Link>, host: u16) -> impl Fn(&Hop) -> Option<Target> + '_ {
+    move |hop: &Hop| {
+        let sends_from_here = link.layout.host(hop.producer, hop.from) == host;
+        let to_elsewhere = link.layout.host(hop.consumer, hop.to) != host;
+        (sends_from_here && to_elsewhere)
+            .then(|| Target::Remote(Arc::new(link.target(hop.consumer, hop.slot, hop.from, hop.to))))
+    }
+}
+
 /// This process's tasks of a run and its links.
 pub(crate) struct HostRun {
     pub(crate) host: u16,
     pub(crate) layout: Arc<Layout>,
     pub(crate) link: Arc<Link>,
     wiring: Wiring,
+    inbound: Arc<Inbound>,
     /// Drives the tasks' async code and the forwarders; `None` once shut down.
     runtime: Option<tokio::runtime::Runtime>,
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
-    threads: Option<TaskThreads>,
+    threads: TaskThreads,
 }
 
 impl HostRun {
@@ -37,37 +51,39 @@ impl HostRun {
         layout: Arc<Layout>,
         session: &Session,
         prefix: &str,
-        host: u16,
+        (host, host_count): (u16, usize),
         options: &RunOptions,
     ) -> Result<Self, String> {
         let runtime = io_runtime().map_err(|e| format!("cannot start the runtime: {e}"))?;
-        let host_count = layout.hosts.iter().flatten().map(|&h| usize::from(h) + 1).max().unwrap_or(1);
-        let link = Arc::new(Link::open(session, prefix, layout.clone(), host, host_count.max(1))?);
-        let elsewhere = |hop: &Hop| -> Option<Target> {
-            let sends_from_here = layout.host(hop.producer, hop.from) == host;
-            let to_elsewhere = layout.host(hop.consumer, hop.to) != host;
-            (sends_from_here && to_elsewhere)
-                .then(|| Target::Remote(Arc::new(link.target(hop.consumer, hop.slot, hop.from, hop.to))))
-        };
-        let wiring = Wiring::build(topology, options, &elsewhere);
-        let inbound = Arc::new(Inbound::start(&link, runtime.handle(), &|c, slot, t| {
-            wiring.inboxes[c][t][slot].clone()
-        }));
-        let (l, i) = (link.clone(), inbound);
+        let link = Arc::new(Link::open(session, prefix, layout.clone(), host, host_count)?);
+        let wiring = Wiring::build(topology, options, &elsewhere(&link, host));
+        let inbound = Arc::new(Inbound::default());
+        for c in 0..layout.components() {
+            for t in (0..layout.tasks(c)).filter(|&t| layout.host(c, t) == host) {
+                inbound.serve_task(&link, runtime.handle(), c, t, &|slot| wiring.inboxes[c][t][slot].clone());
+            }
+        }
+        let (l, i) = (link.clone(), inbound.clone());
         let subscriber = session
             .declare_subscriber(data_key(prefix, host))
             .callback(move |sample| l.on_frame(&sample.payload().to_bytes(), &i))
             .wait()
             .map_err(|e| format!("cannot subscribe to this host's tuples: {e}"))?;
+        let threads = layout.hosts().iter().map(|tasks| tasks.iter().map(|_| None).collect()).collect();
         Ok(HostRun {
             host,
             layout,
             link,
             wiring,
+            inbound,
             runtime: Some(runtime),
             subscriber: Some(subscriber),
-            threads: None,
+            threads,
         })
+    }
+
+    fn handle(&self) -> &tokio::runtime::Handle {
+        self.runtime.as_ref().expect("running until dropped").handle()
     }
 
     /// Starts this host's tasks; they report on `events`.
@@ -77,24 +93,54 @@ impl HostRun {
         options: &RunOptions,
         events: &mpsc::Sender<Event>,
     ) -> std::io::Result<()> {
-        let (layout, host) = (&self.layout, self.host);
-        let runtime = self.runtime.as_ref().expect("running").handle();
-        let threads = spawn_tasks(topology, &mut self.wiring, options, runtime, events, &|c, t| {
+        let (layout, host) = (self.layout.clone(), self.host);
+        let runtime = self.handle().clone();
+        self.threads = spawn_tasks(topology, &mut self.wiring, options, &runtime, events, &|c, t| {
             layout.host(c, t) == host
         })?;
-        self.threads = Some(threads);
         Ok(())
     }
 
-    /// (accepted, resolved) here, tuples sent and received over links
-    /// included; `None` while a tick runs.
-    pub(crate) fn totals(&self) -> Option<(u64, u64)> {
+    /// Applies the moves of a lost host's tasks: every host reroutes, and
+    /// this one starts the tasks that move here.
+    pub(crate) fn reassign(
+        &mut self,
+        topology: &Topology,
+        options: &RunOptions,
+        events: &mpsc::Sender<Event>,
+        moves: &[(usize, usize, u16)],
+    ) -> std::io::Result<()> {
+        for &(c, t, to) in moves {
+            self.layout.move_task(c, t, to);
+        }
+        for &(c, t, _) in moves {
+            self.link.task_moved(c, t);
+        }
+        let runtime = self.handle().clone();
+        for &(c, t, to) in moves.iter().filter(|m| m.2 == self.host) {
+            let emitter = self.wiring.emitter(topology, c, t, &elsewhere(&self.link, self.host));
+            self.wiring.emitters[c][t] = Some(emitter);
+            let wiring = &self.wiring;
+            self.inbound.serve_task(&self.link, &runtime, c, t, &|slot| wiring.inboxes[c][t][slot].clone());
+            self.wiring.replacements.insert((c, t));
+            let replacement = |cc: usize, tt: usize| (cc, tt) == (c, t);
+            let mut spawned =
+                spawn_tasks(topology, &mut self.wiring, options, &runtime, events, &replacement)?;
+            self.threads[c][t] = spawned[c][t].take();
+            tracing::warn!("host {}: took over task {t} of component {c} (now on host {to})", self.host);
+        }
+        Ok(())
+    }
+
+    /// (accepted, resolved) by this host's queues, the tuples sent to and
+    /// received from each host; `None` while a tick runs.
+    pub(crate) fn totals(&self) -> Option<(u64, u64, Vec<u64>, Vec<u64>)> {
         if self.wiring.controls.iter().flatten().any(|c| c.ticking.load(Ordering::SeqCst)) {
             return None;
         }
         let (accepted, resolved) = self.wiring.queue_totals();
-        let (sent, received) = self.link.counts();
-        Some((accepted + sent, resolved + received))
+        let (sent_to, received_from) = self.link.counts();
+        Some((accepted, resolved, sent_to, received_from))
     }
 
     /// Moves this host's tasks of `component` to `stage`; an abort also
@@ -116,7 +162,7 @@ impl HostRun {
 
     /// Joins this host's task threads: (component, task, outcome).
     pub(crate) fn join(&mut self, clean: bool) -> Vec<(usize, usize, TaskOutcome)> {
-        let Some(threads) = self.threads.take() else { return Vec::new() };
+        let threads = std::mem::take(&mut self.threads);
         let mut out = Vec::new();
         for (c, tasks) in join_tasks(threads, clean).into_iter().enumerate() {
             for (t, outcome) in tasks.into_iter().enumerate() {

@@ -2,6 +2,7 @@
 //! processes of the run share.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU16, Ordering};
 
 use crate::grouping::OverflowPolicy;
 use crate::message::MessageType;
@@ -27,10 +28,11 @@ pub(crate) struct EdgeInfo {
     pub(crate) sources: Vec<&'static Source>,
 }
 
-/// Tasks' hosts and the edge table.
+/// Tasks' hosts and the edge table. A task's host changes when its worker
+/// is lost and the task moves to a survivor.
 #[derive(Debug)]
 pub(crate) struct Layout {
-    pub(crate) hosts: Vec<Vec<u16>>,
+    hosts: Vec<Vec<AtomicU16>>,
     offsets: Vec<u32>,
     pub(crate) edges: Vec<EdgeInfo>,
 }
@@ -108,6 +110,7 @@ impl Layout {
                 });
             }
         }
+        let hosts = hosts.into_iter().map(|h| h.into_iter().map(AtomicU16::new).collect()).collect();
         Ok(Layout { hosts, offsets, edges })
     }
 
@@ -118,6 +121,26 @@ impl Layout {
 
     /// The host of task t of component c.
     pub(crate) fn host(&self, c: usize, t: usize) -> u16 {
-        self.hosts[c][t]
+        self.hosts[c][t].load(Ordering::Acquire)
+    }
+
+    /// Moves task t of component c to `host`.
+    pub(crate) fn move_task(&self, c: usize, t: usize, host: u16) {
+        self.hosts[c][t].store(host, Ordering::Release);
+    }
+
+    /// Every task's host now.
+    pub(crate) fn hosts(&self) -> Vec<Vec<u16>> {
+        self.hosts.iter().map(|h| h.iter().map(|x| x.load(Ordering::Acquire)).collect()).collect()
+    }
+
+    /// Tasks per component.
+    pub(crate) fn tasks(&self, c: usize) -> usize {
+        self.hosts[c].len()
+    }
+
+    /// Components.
+    pub(crate) fn components(&self) -> usize {
+        self.hosts.len()
     }
 }

@@ -14,13 +14,17 @@
 //! sender without stopping the link. Drop policies need no credits: the
 //! receiving queue drops, and counts, as it does in process.
 //!
-//! For shutdown detection every process counts tuples sent and tuples
-//! received (queued, dropped or refused by an exited consumer); the
-//! coordinator adds them to the queues' totals.
+//! For shutdown detection every process counts tuples sent to and
+//! received from each other process; the coordinator adds them to the
+//! queues' totals, leaving out processes that were lost.
+//!
+//! When a worker is lost its tasks move: a target looks its task's host up
+//! at every send, and the pair's credits and incremental-codec records
+//! start afresh (what was in flight to the lost process is gone).
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, RwLock};
 use std::time::{Duration, Instant};
 
 use tokio::sync::Semaphore;
@@ -30,7 +34,7 @@ use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 
 use crate::cluster::run::layout::Layout;
-use crate::cluster::wire::{DEFAULT_MAX_FRAME, EdgeTraffic, Frame, Rejections};
+use crate::cluster::wire::{DEFAULT_MAX_FRAME, EdgeTraffic, Frame, Rejections, WireError};
 use crate::error::EmitError;
 use crate::grouping::OverflowPolicy;
 use crate::message::CodecState;
@@ -55,20 +59,30 @@ pub(crate) fn data_key(prefix: &str, host: u16) -> String {
     format!("{prefix}/data/{host}")
 }
 
+/// One sender-to-receiver pair on an edge: (edge, sending task, receiving task).
+type Pair = (u32, u32, u32);
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// One process's side of a run's links.
 pub(crate) struct Link {
-    layout: Arc<Layout>,
+    pub(crate) layout: Arc<Layout>,
     host: u16,
-    /// A publisher per host (`None` for this one).
-    publishers: Vec<Option<Publisher<'static>>>,
-    /// Credits of block edges, by (edge, sending task, receiving task).
-    credits: Mutex<HashMap<(u32, u32, u32), Arc<Semaphore>>>,
+    /// A publisher per host, this one included (a task moved here may still
+    /// be sent to through the link).
+    publishers: Vec<Publisher<'static>>,
+    credits: Mutex<HashMap<Pair, Arc<Semaphore>>>,
+    /// Senders' records of incremental messages.
+    sent_records: Mutex<HashMap<Pair, CodecState>>,
+    /// Receivers' records of incremental messages.
+    held: Mutex<HashMap<Pair, CodecState>>,
     traffic: Vec<EdgeCounters>,
-    sent: AtomicU64,
-    received: AtomicU64,
-    /// Receivers' records of incremental messages, by (edge, sending
-    /// task, receiving task).
-    held: Mutex<HashMap<(u32, u32, u32), CodecState>>,
+    /// Tuples sent to each host.
+    sent_to: Vec<AtomicU64>,
+    /// Tuples received from each host (queued, dropped, or refused).
+    received_from: Vec<AtomicU64>,
     pub(crate) rejections: Rejections,
 }
 
@@ -79,7 +93,7 @@ impl std::fmt::Debug for Link {
 }
 
 impl Link {
-    /// Publishers to every other host of the run; `host_count` hosts in all.
+    /// Publishers to every host of the run; `host_count` hosts in all.
     pub(crate) fn open(
         session: &Session,
         prefix: &str,
@@ -89,34 +103,33 @@ impl Link {
     ) -> Result<Self, String> {
         let mut publishers = Vec::with_capacity(host_count);
         for h in 0..host_count as u16 {
-            if h == host {
-                publishers.push(None);
-                continue;
-            }
             let publisher = session
                 .declare_publisher(data_key(prefix, h))
                 .congestion_control(CongestionControl::Block)
                 .wait()
                 .map_err(|e| format!("cannot publish to host {h}: {e}"))?;
-            publishers.push(Some(publisher));
+            publishers.push(publisher);
         }
         let traffic = layout.edges.iter().map(|_| EdgeCounters::default()).collect();
+        let counters = || (0..host_count).map(|_| AtomicU64::new(0)).collect();
         Ok(Link {
             layout,
             host,
             publishers,
             credits: Mutex::new(HashMap::new()),
-            traffic,
-            sent: AtomicU64::new(0),
-            received: AtomicU64::new(0),
+            sent_records: Mutex::new(HashMap::new()),
             held: Mutex::new(HashMap::new()),
+            traffic,
+            sent_to: counters(),
+            received_from: counters(),
             rejections: Rejections::default(),
         })
     }
 
-    /// Tuples sent to and received from other processes.
-    pub(crate) fn counts(&self) -> (u64, u64) {
-        (self.sent.load(Ordering::SeqCst), self.received.load(Ordering::SeqCst))
+    /// Tuples sent to and received from each host.
+    pub(crate) fn counts(&self) -> (Vec<u64>, Vec<u64>) {
+        let read = |v: &[AtomicU64]| v.iter().map(|c| c.load(Ordering::SeqCst)).collect();
+        (read(&self.sent_to), read(&self.received_from))
     }
 
     /// The traffic this process sent (and decoded) per edge.
@@ -135,8 +148,8 @@ impl Link {
             .collect()
     }
 
-    /// The target for task `to` of `consumer`'s input `slot`, on another
-    /// host, as sent by task `from` of its producer.
+    /// The target for task `to` of `consumer`'s input `slot`, wherever it
+    /// runs, as sent by task `from` of its producer.
     pub(crate) fn target(
         self: &Arc<Self>,
         consumer: usize,
@@ -146,29 +159,42 @@ impl Link {
     ) -> RemoteTarget {
         let edge = self.layout.edge_id(consumer, slot);
         let info = &self.layout.edges[edge as usize];
-        let host = self.layout.host(consumer, to);
+        let pair = (edge, from as u32, to as u32);
         let credits = (info.policy == OverflowPolicy::Block).then(|| {
             let credits = Arc::new(Semaphore::new(info.capacity));
-            self.credits
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .insert((edge, from as u32, to as u32), credits.clone());
+            lock(&self.credits).insert(pair, credits.clone());
             credits
         });
-        let sent = info.message.incremental_codec().map(|codec| Mutex::new((codec.new_sent)()));
-        RemoteTarget { link: self.clone(), host, edge, from: from as u32, to: to as u32, credits, sent }
+        RemoteTarget { link: self.clone(), consumer, pair, credits }
+    }
+
+    /// Task t of component c has moved (its process was lost): the pairs
+    /// that send to it start with full credits and empty records, and so
+    /// do the records of what its old incarnation sent here.
+    pub(crate) fn task_moved(&self, c: usize, t: usize) {
+        let to_it =
+            |&(edge, _, to): &Pair| self.layout.edges[edge as usize].consumer == c && to as usize == t;
+        let from_it =
+            |&(edge, from, _): &Pair| self.layout.edges[edge as usize].producer == c && from as usize == t;
+        for (pair, credits) in lock(&self.credits).iter() {
+            if to_it(pair) {
+                let capacity = self.layout.edges[pair.0 as usize].capacity;
+                credits.add_permits(capacity.saturating_sub(credits.available_permits()));
+            }
+        }
+        lock(&self.sent_records).retain(|pair, _| !to_it(pair));
+        lock(&self.held).retain(|pair, _| !from_it(pair));
     }
 
     /// Ends every wait for credits (the run is aborting).
     pub(crate) fn close(&self) {
-        for c in self.credits.lock().unwrap_or_else(|e| e.into_inner()).values() {
+        for c in lock(&self.credits).values() {
             c.close();
         }
     }
 
     async fn publish(&self, host: u16, bytes: Vec<u8>) -> Result<(), String> {
-        let publisher =
-            self.publishers[usize::from(host)].as_ref().ok_or("no link to this process itself")?;
+        let publisher = self.publishers.get(usize::from(host)).ok_or("no such host")?;
         publisher.put(bytes).await.map_err(|e| e.to_string())
     }
 
@@ -177,86 +203,84 @@ impl Link {
     /// refused and counted.
     pub(crate) fn on_frame(&self, bytes: &[u8], inbound: &Inbound) {
         match Frame::decode(bytes, DEFAULT_MAX_FRAME) {
-            Ok(Frame::Tuple { edge, from, to, payload }) => {
-                // The sender counted it; whatever becomes of it here, it
-                // has been received.
-                if let Err(why) = self.accept(edge, from, to, &payload, inbound) {
+            Ok(Frame::Tuple { sender, edge, from, to, payload }) => {
+                if let Err(why) = self.accept(sender, (edge, from, to), &payload, inbound) {
                     tracing::warn!("host {}: refused a tuple on edge {edge}: {why}", self.host);
-                    self.rejections.count(&crate::cluster::wire::WireError::Malformed(why));
-                    self.received.fetch_add(1, Ordering::SeqCst);
+                    self.rejections.count(&WireError::Malformed(why));
+                    // The sender counted it; refused, it is still received.
+                    if let Some(c) = self.received_from.get(usize::from(sender)) {
+                        c.fetch_add(1, Ordering::SeqCst);
+                    }
                 }
             }
-            Ok(Frame::Credit { edge, from, to, n }) => {
-                let credits = self.credits.lock().unwrap_or_else(|e| e.into_inner());
-                match credits.get(&(edge, from, to)) {
-                    Some(c) => c.add_permits(n as usize),
-                    None => self.rejections.count(&crate::cluster::wire::WireError::Malformed(format!(
-                        "credit for an unknown edge {edge} ({from} → {to})"
-                    ))),
-                }
-            }
+            Ok(Frame::Credit { edge, from, to, n }) => match lock(&self.credits).get(&(edge, from, to)) {
+                Some(c) => c.add_permits(n as usize),
+                None => self.rejections.count(&WireError::Malformed(format!(
+                    "credit for an unknown edge {edge} ({from} → {to})"
+                ))),
+            },
             Ok(other) => {
-                let why = format!("unexpected on the data key: {other:?}");
-                self.rejections.count(&crate::cluster::wire::WireError::Malformed(why));
+                self.rejections
+                    .count(&WireError::Malformed(format!("unexpected on the data key: {other:?}")));
             }
             Err(e) => self.rejections.count(&e),
         }
     }
 
-    fn accept(&self, edge: u32, from: u32, to: u32, payload: &[u8], inbound: &Inbound) -> Result<(), String> {
+    fn accept(&self, sender: u16, pair: Pair, payload: &[u8], inbound: &Inbound) -> Result<(), String> {
+        let (edge, from, to) = pair;
+        if usize::from(sender) >= self.received_from.len() {
+            return Err(format!("from host {sender}, which is not in the run"));
+        }
         let info = self.layout.edges.get(edge as usize).ok_or("no such edge")?;
         let source = *info.sources.get(from as usize).ok_or("no such sending task")?;
         let forward = inbound
-            .forwarders
-            .get(&(edge, to))
+            .forwarder(edge, to)
             .ok_or_else(|| format!("task {to} of the consumer is not on this host"))?;
         let started = Instant::now();
         let decoded = match info.message.incremental_codec() {
             None => info.message.decode(payload).map_err(|e| e.to_string()),
             Some(codec) => {
-                let mut held = self.held.lock().unwrap_or_else(|e| e.into_inner());
-                let state = held.entry((edge, from, to)).or_insert_with(codec.new_held);
-                (codec.decode)(payload, state)
+                let mut held = lock(&self.held);
+                (codec.decode)(payload, held.entry(pair).or_insert_with(codec.new_held))
             }
         }
         .map_err(|e| format!("payload does not decode: {e}"));
         self.traffic[edge as usize].decode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
         let tuple = Tuple { source, payload: decoded?, anchor: None };
-        forward.send((tuple, from)).map_err(|_| "the run is over".to_string())
+        forward.send(Forwarded { tuple, sender, from }).map_err(|_| "the run is over".to_string())
     }
 }
 
-/// A consumer task's input on another host, as one producer task sends
-/// to it.
+/// A consumer task's input as one producer task sends to it through the
+/// link: in another process, or moved here after a loss.
 #[derive(Debug)]
 pub(crate) struct RemoteTarget {
     link: Arc<Link>,
-    host: u16,
-    edge: u32,
-    from: u32,
-    to: u32,
+    consumer: usize,
+    pair: Pair,
     /// Room at the receiver, on a block edge.
     credits: Option<Arc<Semaphore>>,
-    /// What the receiver holds, for an incremental message type.
-    sent: Option<Mutex<CodecState>>,
 }
 
 impl RemoteTarget {
     /// Sends `tuple`, first waiting for a credit on a block edge (the wait
     /// is added to `blocked`).
     pub(crate) async fn deliver(&self, tuple: Tuple, blocked: &mut Duration) -> Result<(), EmitError> {
-        let info = &self.link.layout.edges[self.edge as usize];
-        let counters = &self.link.traffic[self.edge as usize];
+        let link = &self.link;
+        let (edge, from, to) = self.pair;
+        let info = &link.layout.edges[edge as usize];
+        let counters = &link.traffic[edge as usize];
         let started = Instant::now();
-        let payload = match &self.sent {
+        let payload = match info.message.incremental_codec() {
             None => info.message.encode(&*tuple.payload).map_err(|e| e.to_string()),
-            Some(sent) => {
-                let codec = info.message.incremental_codec().expect("an incremental type");
-                (codec.encode)(&*tuple.payload, &mut sent.lock().unwrap_or_else(|e| e.into_inner()))
+            Some(codec) => {
+                let mut records = lock(&link.sent_records);
+                (codec.encode)(&*tuple.payload, records.entry(self.pair).or_insert_with(codec.new_sent))
             }
         }
         .map_err(EmitError::Transport)?;
-        let frame = Frame::Tuple { edge: self.edge, from: self.from, to: self.to, payload }.encode();
+        let frame = Frame::Tuple { sender: link.host, edge, from, to, payload }.encode();
         counters.encode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
         if let Some(credits) = &self.credits {
             let waited = Instant::now();
@@ -265,64 +289,69 @@ impl RemoteTarget {
         }
         counters.messages.fetch_add(1, Ordering::Relaxed);
         counters.bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
+        let host = link.layout.host(self.consumer, to as usize);
         // Counted before it can arrive, so no look at the totals sees it
         // received but not sent.
-        self.link.sent.fetch_add(1, Ordering::SeqCst);
-        self.link.publish(self.host, frame).await.map_err(EmitError::Transport)
+        link.sent_to[usize::from(host)].fetch_add(1, Ordering::SeqCst);
+        link.publish(host, frame).await.map_err(EmitError::Transport)
     }
 }
 
-/// A queued tuple and the task that sent it.
-type Forwarded = (Tuple, u32);
+/// A tuple on its way to its queue: the host and task that sent it.
+struct Forwarded {
+    tuple: Tuple,
+    sender: u16,
+    from: u32,
+}
 
 /// Where this host's incoming tuples go: a forwarder per local queue.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub(crate) struct Inbound {
-    forwarders: HashMap<(u32, u32), tokio::sync::mpsc::UnboundedSender<Forwarded>>,
+    forwarders: RwLock<HashMap<(u32, u32), tokio::sync::mpsc::UnboundedSender<Forwarded>>>,
+}
+
+impl std::fmt::Debug for Inbound {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Inbound").finish_non_exhaustive()
+    }
 }
 
 impl Inbound {
-    /// Forwarders for every local queue that a task elsewhere sends to,
-    /// on `runtime`. `queue(c, slot, t)` is the queue of a local task.
-    pub(crate) fn start(
+    fn forwarder(&self, edge: u32, to: u32) -> Option<tokio::sync::mpsc::UnboundedSender<Forwarded>> {
+        self.forwarders.read().unwrap_or_else(|e| e.into_inner()).get(&(edge, to)).cloned()
+    }
+
+    /// Forwarders, on `runtime`, for every input of task t of component c
+    /// (a task of this host). `queue(slot)` is the queue of its input.
+    pub(crate) fn serve_task(
+        &self,
         link: &Arc<Link>,
         runtime: &tokio::runtime::Handle,
-        queue: &dyn Fn(usize, usize, usize) -> Arc<EdgeQueue>,
-    ) -> Self {
+        c: usize,
+        t: usize,
+        queue: &dyn Fn(usize) -> Arc<EdgeQueue>,
+    ) {
         let layout = &link.layout;
-        let mut forwarders = HashMap::new();
-        for (edge, info) in layout.edges.iter().enumerate() {
-            let fed_from_elsewhere =
-                (0..info.sources.len()).any(|from| layout.host(info.producer, from) != link.host);
-            if !fed_from_elsewhere {
-                continue;
-            }
-            for to in 0..layout.hosts[info.consumer].len() {
-                if layout.host(info.consumer, to) != link.host {
-                    continue;
-                }
-                let (send, mut receive) = tokio::sync::mpsc::unbounded_channel::<Forwarded>();
-                let target = queue(info.consumer, info.slot, to);
-                let link = link.clone();
-                let (edge, producer, block) =
-                    (edge as u32, info.producer, info.policy == OverflowPolicy::Block);
-                runtime.spawn(async move {
-                    while let Some((tuple, from)) = receive.recv().await {
-                        let mut blocked = Duration::ZERO;
-                        let pushed = target.push(tuple, &mut blocked).await;
-                        link.received.fetch_add(1, Ordering::SeqCst);
-                        if block && matches!(pushed, Push::Queued) {
-                            let credit = Frame::Credit { edge, from, to: to as u32, n: 1 }.encode();
-                            let host = link.layout.host(producer, from as usize);
-                            if let Err(e) = link.publish(host, credit).await {
-                                tracing::warn!("cannot return a credit to host {host}: {e}");
-                            }
+        let mut forwarders = self.forwarders.write().unwrap_or_else(|e| e.into_inner());
+        for (edge, info) in layout.edges.iter().enumerate().filter(|(_, i)| i.consumer == c) {
+            let (send, mut receive) = tokio::sync::mpsc::unbounded_channel::<Forwarded>();
+            let target = queue(info.slot);
+            let link = link.clone();
+            let (edge, to, block) = (edge as u32, t as u32, info.policy == OverflowPolicy::Block);
+            runtime.spawn(async move {
+                while let Some(Forwarded { tuple, sender, from }) = receive.recv().await {
+                    let mut blocked = Duration::ZERO;
+                    let pushed = target.push(tuple, &mut blocked).await;
+                    link.received_from[usize::from(sender)].fetch_add(1, Ordering::SeqCst);
+                    if block && matches!(pushed, Push::Queued) {
+                        let credit = Frame::Credit { edge, from, to, n: 1 }.encode();
+                        if let Err(e) = link.publish(sender, credit).await {
+                            tracing::warn!("cannot return a credit to host {sender}: {e}");
                         }
                     }
-                });
-                forwarders.insert((edge, to as u32), send);
-            }
+                }
+            });
+            forwarders.insert((edge, to), send);
         }
-        Inbound { forwarders }
     }
 }

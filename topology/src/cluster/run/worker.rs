@@ -64,8 +64,8 @@ pub fn host_run(
         .declare_subscriber(plan.control_key())
         .wait()
         .map_err(|e| refuse(format!("cannot subscribe to run control: {e}")))?;
-    let mut host =
-        HostRun::build(&topology, layout, session, &plan.run, plan.host, options).map_err(refuse)?;
+    let hosts = (plan.host, usize::from(plan.host_count));
+    let mut host = HostRun::build(&topology, layout, session, &plan.run, hosts, options).map_err(refuse)?;
     put(session, reply_key, Control::Ready { run: plan.run.clone() })?;
     let report_key = plan.report_key();
     let next = |wait: Duration| -> Result<Option<Control>, String> {
@@ -96,7 +96,6 @@ pub fn host_run(
     }
     let (events_tx, events) = mpsc::channel();
     host.start(&topology, options, &events_tx).map_err(|e| format!("cannot start tasks: {e}"))?;
-    drop(events_tx);
     let mut aborted = false;
     loop {
         while let Ok(Event { component, task, kind }) = events.try_recv() {
@@ -105,6 +104,7 @@ pub fn host_run(
                 EventKind::Finished => TaskEvent::Finished,
                 EventKind::Failed(m) => TaskEvent::Failed(m),
                 EventKind::Exited => TaskEvent::Exited,
+                EventKind::HostLost(_) => continue,
             };
             put(
                 session,
@@ -121,12 +121,32 @@ pub fn host_run(
                 }
             }
             Some(Control::Status { nonce }) => {
-                let (accepted, resolved, ticking) = match host.totals() {
-                    Some((a, r)) => (a, r, false),
-                    None => (0, 0, true),
+                let totals = match host.totals() {
+                    Some((accepted, resolved, sent_to, received_from)) => Control::Totals {
+                        nonce,
+                        host: plan.host,
+                        accepted,
+                        resolved,
+                        sent_to,
+                        received_from,
+                        ticking: false,
+                    },
+                    None => Control::Totals {
+                        nonce,
+                        host: plan.host,
+                        accepted: 0,
+                        resolved: 0,
+                        sent_to: Vec::new(),
+                        received_from: Vec::new(),
+                        ticking: true,
+                    },
                 };
-                let totals = Control::Totals { nonce, host: plan.host, accepted, resolved, ticking };
                 put(session, &report_key, totals)?;
+            }
+            Some(Control::Reassign { moves, .. }) => {
+                let moves = checked_moves(&topology, &moves, plan.host_count);
+                host.reassign(&topology, options, &events_tx, &moves)
+                    .map_err(|e| format!("cannot start a task moved here: {e}"))?;
             }
             Some(Control::Collect) => break,
             Some(_) | None => {}
@@ -145,6 +165,25 @@ pub fn host_run(
     release(&plan.coordinator);
     put(session, &report_key, outcomes)?;
     Ok(Hosted { topology: topology.name().to_string(), tasks: count, aborted })
+}
+
+/// The moves that name tasks of this topology and hosts of this run.
+fn checked_moves(
+    topology: &Topology,
+    moves: &[(u32, u32, u16)],
+    host_count: u16,
+) -> Vec<(usize, usize, u16)> {
+    moves
+        .iter()
+        .map(|&(c, t, h)| (c as usize, t as usize, h))
+        .filter(|&(c, t, h)| {
+            let fits = topology.components.get(c).is_some_and(|p| t < p.spec.parallelism) && h < host_count;
+            if !fits {
+                tracing::warn!("worker: refused a move of task {t} of component {c} to host {h}");
+            }
+            fits
+        })
+        .collect()
 }
 
 fn host_rejects(e: &crate::cluster::wire::WireError) {

@@ -115,6 +115,10 @@ pub(crate) enum EventKind {
     Failed(String),
     /// The thread is about to end.
     Exited,
+    /// A process of a cluster run was lost, with the tasks it hosted
+    /// (reported against one of them).
+    #[cfg_attr(not(feature = "cluster"), allow(dead_code))]
+    HostLost(u16),
 }
 
 /// A task's report.

@@ -25,6 +25,13 @@ pub(crate) trait Hosts {
     fn totals(&mut self) -> Option<(u64, u64)>;
     /// Stops everything now: marks the run aborting and closes the queues.
     fn abort(&mut self);
+
+    /// A process of the run was lost: moves its tasks to the others, or
+    /// says why the run cannot go on. `running`: the spouts are not done.
+    fn recover(&mut self, host: u16, running: bool) -> Result<(), String> {
+        let _ = running;
+        Err(format!("host {host} was lost"))
+    }
 }
 
 impl Hosts for &Wiring {
@@ -119,6 +126,13 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
                     EventKind::Failed(message) => {
                         self.abort(events, grace);
                         return Some((component, task, message));
+                    }
+                    EventKind::HostLost(host) => {
+                        if let Err(message) = self.hosts.recover(host, phase == Phase::Running) {
+                            self.abort(events, grace);
+                            return Some((component, task, message));
+                        }
+                        self.last_scan = None;
                     }
                 },
                 Err(mpsc::RecvTimeoutError::Timeout) => {}

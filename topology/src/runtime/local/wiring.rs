@@ -24,6 +24,8 @@ pub(crate) struct Wiring {
     pub(crate) emitters: Vec<Vec<Option<Emitter>>>,
     pub(crate) trackers: Vec<Vec<Option<Arc<AckTracker>>>>,
     pub(crate) aborting: Arc<AtomicBool>,
+    /// Tasks started again after their process was lost (cluster mode).
+    pub(crate) replacements: std::collections::HashSet<(usize, usize)>,
     topology_name: Arc<str>,
     out_dir: Option<Arc<PathBuf>>,
     progress: Option<Arc<Progress>>,
@@ -123,99 +125,90 @@ impl Wiring {
                     .collect()
             })
             .collect();
-        let emitters = comps
-            .iter()
-            .enumerate()
-            .map(|(c, p)| {
-                (0..p.spec.parallelism)
-                    .map(|t| {
-                        let component: Arc<str> = p.spec.name.as_str().into();
-                        let streams = p
-                            .declared
-                            .outputs()
-                            .iter()
-                            .map(|decl| {
-                                let name: Arc<str> = decl.name.as_str().into();
-                                let mut subscriptions = Vec::new();
-                                for (ci, consumer) in comps.iter().enumerate() {
-                                    for (ii, input) in consumer.spec.inputs.iter().enumerate() {
-                                        if input.from != p.spec.name || input.stream != decl.name {
-                                            continue;
-                                        }
-                                        let targets: Vec<Target> = edge[ci][ii]
-                                            .iter()
-                                            .enumerate()
-                                            .map(|(to, queue)| {
-                                                let hop =
-                                                    Hop { producer: c, from: t, consumer: ci, slot: ii, to };
-                                                elsewhere(&hop)
-                                                    .unwrap_or_else(|| Target::Local(queue.clone()))
-                                            })
-                                            .collect();
-                                        let route = match &input.grouping {
-                                            Grouping::Shuffle | Grouping::LocalOrShuffle => Route::RoundRobin,
-                                            Grouping::Fields(f) => {
-                                                Route::Fields(static_fields(decl.message.fields(), f))
-                                            }
-                                            Grouping::All => Route::All,
-                                            Grouping::Global => Route::Global,
-                                            Grouping::Direct => Route::Direct,
-                                        };
-                                        // Producer tasks start their round-robin at different
-                                        // consumers so that they do not move in lockstep.
-                                        let next = t % targets.len();
-                                        subscriptions.push(Subscription { route, targets, next });
-                                    }
-                                }
-                                let has_direct =
-                                    subscriptions.iter().any(|s| matches!(s.route, Route::Direct));
-                                StreamRoute {
-                                    has_direct,
-                                    name: name.clone(),
-                                    message: decl.message,
-                                    source: Source::Stream {
-                                        component: component.clone(),
-                                        stream: name,
-                                        task: t,
-                                    }
-                                    .interned(),
-                                    subscriptions,
-                                }
-                            })
-                            .collect();
-                        let peers = p.declared.peer.map(|message| PeerRoute {
-                            message,
-                            source: Source::Peer { task: t }.interned(),
-                            targets: peer[c]
-                                .iter()
-                                .flatten()
-                                .enumerate()
-                                .map(|(to, queue)| {
-                                    let slot = p.spec.inputs.len();
-                                    let hop = Hop { producer: c, from: t, consumer: c, slot, to };
-                                    elsewhere(&hop).unwrap_or_else(|| Target::Local(queue.clone()))
-                                })
-                                .collect(),
-                        });
-                        let acking = p.spec.ack.map(|a| SpoutAcking {
-                            tracker: trackers[c][t].clone().expect("tracker exists when acking"),
-                            timeout: a.timeout,
-                        });
-                        Some(Emitter::new(t, streams, peers, acking, aborting.clone()))
-                    })
-                    .collect()
-            })
-            .collect();
-        Wiring {
+        let mut wiring = Wiring {
             controls,
             inboxes,
-            emitters,
+            emitters: Vec::new(),
+            replacements: Default::default(),
             trackers,
             aborting,
             topology_name: topology.spec.name.as_str().into(),
             out_dir: options.out_dir.clone().map(Arc::new),
             progress: options.progress.clone(),
-        }
+        };
+        wiring.emitters = comps
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                (0..p.spec.parallelism).map(|t| Some(wiring.emitter(topology, c, t, elsewhere))).collect()
+            })
+            .collect();
+        wiring
+    }
+
+    /// The emitter of task t of component c, routed by where every
+    /// consumer task is now (`elsewhere`).
+    pub(crate) fn emitter(
+        &self,
+        topology: &Topology,
+        c: usize,
+        t: usize,
+        elsewhere: Elsewhere<'_>,
+    ) -> Emitter {
+        let comps = &topology.components;
+        let p = &comps[c];
+        let queue = |ci: usize, slot: usize, to: usize| {
+            let hop = Hop { producer: c, from: t, consumer: ci, slot, to };
+            elsewhere(&hop).unwrap_or_else(|| Target::Local(self.inboxes[ci][to][slot].clone()))
+        };
+        let component: Arc<str> = p.spec.name.as_str().into();
+        let streams = p
+            .declared
+            .outputs()
+            .iter()
+            .map(|decl| {
+                let name: Arc<str> = decl.name.as_str().into();
+                let mut subscriptions = Vec::new();
+                for (ci, consumer) in comps.iter().enumerate() {
+                    for (ii, input) in consumer.spec.inputs.iter().enumerate() {
+                        if input.from != p.spec.name || input.stream != decl.name {
+                            continue;
+                        }
+                        let targets: Vec<Target> =
+                            (0..consumer.spec.parallelism).map(|to| queue(ci, ii, to)).collect();
+                        let route = match &input.grouping {
+                            Grouping::Shuffle | Grouping::LocalOrShuffle => Route::RoundRobin,
+                            Grouping::Fields(f) => Route::Fields(static_fields(decl.message.fields(), f)),
+                            Grouping::All => Route::All,
+                            Grouping::Global => Route::Global,
+                            Grouping::Direct => Route::Direct,
+                        };
+                        // Producer tasks start their round-robin at different
+                        // consumers so that they do not move in lockstep.
+                        let next = t % targets.len();
+                        subscriptions.push(Subscription { route, targets, next });
+                    }
+                }
+                let has_direct = subscriptions.iter().any(|s| matches!(s.route, Route::Direct));
+                StreamRoute {
+                    has_direct,
+                    name: name.clone(),
+                    message: decl.message,
+                    source: Source::Stream { component: component.clone(), stream: name, task: t }.interned(),
+                    subscriptions,
+                }
+            })
+            .collect();
+        let peers = p.declared.peer.map(|message| PeerRoute {
+            message,
+            source: Source::Peer { task: t }.interned(),
+            targets: (0..p.spec.parallelism).map(|to| queue(c, p.spec.inputs.len(), to)).collect(),
+        });
+        let acking = p.spec.ack.map(|a| SpoutAcking {
+            tracker: self.trackers[c][t].clone().expect("tracker exists when acking"),
+            timeout: a.timeout,
+        });
+        Emitter::new(t, streams, peers, acking, self.aborting.clone())
     }
 
     pub(crate) fn context(&self, topology: &Topology, c: usize, t: usize) -> TaskContext {
@@ -228,6 +221,7 @@ impl Wiring {
             seed: topology.spec.seed,
             out_dir: self.out_dir.clone(),
             progress: self.progress.clone(),
+            replacement: self.replacements.contains(&(c, t)),
         }
     }
 
