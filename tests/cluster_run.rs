@@ -262,3 +262,28 @@ fn a_killed_coordinator_leaves_no_worker_running() {
     eprintln!("worker exited {:.2} s after its coordinator was killed", killed.elapsed().as_secs_f64());
     assert!(workers.log(0).contains("the coordinator is gone"), "{}", workers.log(0));
 }
+
+#[test]
+fn slam_that_loses_a_matcher_s_worker_fails_saying_why_and_leaves_nothing_running() {
+    let mut workers = Workers::start(2);
+    let cluster = workers.cluster_file("");
+    let out = tempfile::tempdir().unwrap();
+    let log = aces();
+    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["slam", "--log", &log, "--matchers", "2", "--particles", "60"])
+        .args(["--out", out.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    workers.children[1].kill().unwrap();
+    let done = run.wait_with_output().unwrap();
+    let stderr = text(&done.stderr);
+    assert_eq!(done.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("bolt \"matcher\" task 1") && stderr.contains("worker was lost"), "{stderr}");
+    // The surviving worker hosted its share to the end and is ready for
+    // the next run.
+    assert!(workers.children[0].try_wait().unwrap().is_none(), "{}", workers.log(0));
+}

@@ -248,6 +248,13 @@ impl<M: HostedModel> Bolt for Matcher<M> {
     }
 
     async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        if ctx.is_replacement() {
+            // The particles it held went with its process; rebuilding them
+            // from the survivors' is not done yet.
+            return Err("pf.matcher: this task's worker was lost with its particles, \
+                        and the particle filter cannot yet rebuild them from the other tasks'"
+                .into());
+        }
         self.task = ctx.task_index();
         self.tasks = ctx.task_count();
         self.seed = ctx.seed();
