@@ -11,7 +11,7 @@ use zenoh::Wait;
 
 use crate::cluster::run::host::HostRun;
 use crate::cluster::run::layout::Layout;
-use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, RunPlan, TaskEvent};
+use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan, TaskEvent};
 use crate::plan::Topology;
 use crate::registry::Registry;
 use crate::runtime::local::RunOptions;
@@ -68,13 +68,15 @@ pub fn host_run(
     let mut host = HostRun::build(&topology, layout, session, &plan.run, hosts, options).map_err(refuse)?;
     put(session, reply_key, Control::Ready { run: plan.run.clone() })?;
     let report_key = plan.report_key();
+    let control_refused = Rejections::default();
     let next = |wait: Duration| -> Result<Option<Control>, String> {
         match control.recv_timeout(wait) {
             Ok(Some(sample)) => match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
                 Ok(Frame::Control(c)) => Ok(Some(c)),
                 Ok(_) => Ok(None),
                 Err(e) => {
-                    host_rejects(&e);
+                    tracing::warn!("worker: refused a run control frame: {e}");
+                    control_refused.count(&e);
                     Ok(None)
                 }
             },
@@ -160,7 +162,10 @@ pub fn host_run(
         host: plan.host,
         tasks: tasks.into_iter().map(|(c, t, o)| (c as u32, t as u32, o.to_wire())).collect(),
         edges: host.link.traffic(),
-        refused: host.link.rejections.totals(),
+        refused: {
+            let ((a, b), (c, d)) = (host.link.rejections.totals(), control_refused.totals());
+            (a + c, b + d)
+        },
     };
     release(&plan.coordinator);
     put(session, &report_key, outcomes)?;
@@ -184,8 +189,4 @@ fn checked_moves(
             fits
         })
         .collect()
-}
-
-fn host_rejects(e: &crate::cluster::wire::WireError) {
-    tracing::warn!("worker: refused a run control frame: {e}");
 }
