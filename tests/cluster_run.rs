@@ -212,14 +212,21 @@ fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> std::process::Ch
         .unwrap()
 }
 
+/// Kills worker i 0.7 s after it started hosting a run.
+fn kill_once_hosting(workers: &mut Workers, i: usize) {
+    let log = workers.wait_for_log(i, "hosting run");
+    assert!(log.contains("hosting run"), "worker {i} never hosted the run: {log}");
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    workers.children[i].kill().unwrap();
+}
+
 #[test]
 fn a_lost_worker_s_tasks_move_to_a_survivor_and_the_run_completes() {
     let mut workers = Workers::start(2);
     let cluster = workers.cluster_file("relay = [\"w1\", \"w2\"]");
     let out = tempfile::tempdir().unwrap();
     let run = slow_probe_run(&cluster, out.path(), 2);
-    std::thread::sleep(std::time::Duration::from_millis(1500));
-    workers.children[1].kill().unwrap();
+    kill_once_hosting(&mut workers, 1);
     let done = run.wait_with_output().unwrap();
     assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
     let m = metrics(out.path());
@@ -240,7 +247,8 @@ fn a_killed_coordinator_leaves_no_worker_running() {
     let cluster = workers.cluster_file("relay = [\"w1\"]");
     let out = tempfile::tempdir().unwrap();
     let mut run = slow_probe_run(&cluster, out.path(), 1);
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+    workers.wait_for_log(0, "hosting run");
+    std::thread::sleep(std::time::Duration::from_millis(700));
     run.kill().unwrap();
     let _ = run.wait();
     let killed = std::time::Instant::now();
@@ -277,8 +285,7 @@ fn slam_that_loses_a_matcher_s_worker_fails_saying_why_and_leaves_nothing_runnin
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(1500));
-    workers.children[1].kill().unwrap();
+    kill_once_hosting(&mut workers, 1);
     let done = run.wait_with_output().unwrap();
     let stderr = text(&done.stderr);
     assert_eq!(done.status.code(), Some(1), "{stderr}");

@@ -74,6 +74,7 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
                     None => break,
                 },
             };
+            eprintln!("squall worker: hosting run {}", plan.run);
             let session = presence.session().clone();
             let reply = reply_key(presence.endpoint());
             let release = presence.releaser();
