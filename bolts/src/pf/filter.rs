@@ -148,7 +148,7 @@ where
         }
         for (shard, inbox) in self.shards.iter_mut().zip(inboxes) {
             shard
-                .adopt(model, self.step, input, parents, task_of, &decision.fresh, inbox)
+                .adopt(model, self.step, input, parents, task_of, &decision.fresh, &[], inbox)
                 .expect("every parent is held by some shard");
         }
         if let Some(task_of) = placed {

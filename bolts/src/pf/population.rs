@@ -110,7 +110,10 @@ impl Population {
         let (weights, neff) = normalize(&self.log_weights, smoothing);
         let n = self.len();
         let resampled = neff < threshold * n as Real;
-        let parents = if resampled { draw(scheme, &weights, self.seed, step) } else { (0..n).collect() };
+        let mut parents = if resampled { draw(scheme, &weights, self.seed, step) } else { (0..n).collect() };
+        if resampled {
+            self.avoid_lost(&mut parents);
+        }
         let (stamp, odometry) = mark;
         let nodes: Vec<Arc<Node>> = parents
             .iter()
@@ -161,6 +164,30 @@ impl Population {
             .collect()
     }
 
+    /// Replaces a lost parent (a draw can land on a weightless slot at
+    /// the end of the cumulative sum) by the nearest live one before it,
+    /// else after it.
+    fn avoid_lost(&self, parents: &mut [usize]) {
+        let live = |p: usize| self.log_weights[p] != Real::NEG_INFINITY;
+        for parent in parents.iter_mut() {
+            let p = *parent;
+            if live(p) {
+                continue;
+            }
+            let before = (0..p).rev().find(|&q| live(q));
+            if let Some(q) = before.or_else(|| (p + 1..self.len()).find(|&q| live(q))) {
+                *parent = q;
+            }
+        }
+    }
+
+    /// Marks `slot` lost (its state went with a process): it weighs
+    /// nothing, so it is neither the best nor drawn as a parent.
+    pub fn lose(&mut self, slot: usize) {
+        self.log_weights[slot] = Real::NEG_INFINITY;
+        self.lineage_weights[slot] = Real::NEG_INFINITY;
+    }
+
     /// The slot with the highest lineage weight (the last of equals).
     pub fn best(&self) -> usize {
         self.lineage_weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(slot, _)| slot)
@@ -209,6 +236,24 @@ mod tests {
         assert_eq!(d.best, 3, "equal lineage weights: the last slot");
         let t = p.best_trajectory();
         assert_eq!(t.iter().map(|n| n.1.x).collect::<Vec<_>>(), vec![0.0, 2.0]);
+    }
+
+    #[test]
+    fn lost_slots_are_never_drawn_nor_the_best() {
+        // Slot 3 was lost with its process; slot 2, the heaviest, survives.
+        let mut p = Population::start(&[at(0.0); 4], 7, 0.0, at(0.0));
+        p.lose(3);
+        assert_ne!(p.best(), 3);
+        let reports: Vec<(Pose2, Real)> = [(1.0, -5.0), (2.0, -5.0), (3.0, 0.0), (4.0, Real::NEG_INFINITY)]
+            .map(|(x, l)| (at(x), l))
+            .to_vec();
+        // An infinite threshold forces resampling, as after a loss.
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, Real::INFINITY, Scheme::LowVariance, None);
+        assert!(d.resampled);
+        assert!(!d.parents.contains(&3), "{:?}", d.parents);
+        assert_eq!(d.weights[3], 0.0);
+        assert_eq!(d.parents.len(), 4);
+        assert!(d.parents.contains(&2), "{:?}", d.parents);
     }
 
     #[test]

@@ -70,6 +70,13 @@ impl<M: ParticleModel> Shard<M> {
         Shard { task, seed, held, scratch: M::Scratch::default() }
     }
 
+    /// Task `task`'s shard holding `held` (slot, state): a task that
+    /// joins the filter with states sent to it.
+    pub fn from_held(task: usize, seed: u64, mut held: Vec<(usize, M::State)>) -> Self {
+        held.sort_by_key(|h| h.0);
+        Shard { task, seed, held, scratch: M::Scratch::default() }
+    }
+
     /// The (slot, pose) of every particle held.
     pub fn poses(&self, model: &M) -> Vec<(usize, Pose2)> {
         self.held.iter().map(|(slot, s)| (*slot, model.pose(s))).collect()
@@ -133,8 +140,9 @@ impl<M: ParticleModel> Shard<M> {
     /// Takes up the new set after the decision for reading `step`: the new
     /// slots placed on this task, copied from local parents or taken from
     /// `incoming` (new slot, state), and the `fresh` ones (sorted) redrawn
-    /// by the model given `reading`, the reading just corrected. Fails,
-    /// naming the slot, if a state is missing.
+    /// by the model given `reading`, the reading just corrected. New slots
+    /// in `holes` (sorted; their parents were lost) are left out. Fails,
+    /// naming the slot, if another state is missing.
     #[allow(clippy::too_many_arguments)]
     pub fn adopt(
         &mut self,
@@ -144,6 +152,7 @@ impl<M: ParticleModel> Shard<M> {
         parents: &[usize],
         task_of: &[usize],
         fresh: &[usize],
+        holes: &[usize],
         incoming: impl IntoIterator<Item = (usize, M::State)>,
     ) -> Result<(), String> {
         let mut received: Vec<(usize, Option<M::State>)> =
@@ -155,8 +164,9 @@ impl<M: ParticleModel> Shard<M> {
         // its last child and is cloned only for the others (without
         // resampling nothing is cloned).
         let mut children = vec![0usize; self.held.len()];
+        let hole = |j: usize| holes.binary_search(&j).is_ok();
         for (j, (&p, &to)) in parents.iter().zip(task_of).enumerate() {
-            if to != self.task {
+            if to != self.task || hole(j) {
                 continue;
             }
             match local(p) {
@@ -169,7 +179,7 @@ impl<M: ParticleModel> Shard<M> {
             std::mem::take(&mut self.held).into_iter().map(|(slot, s)| (slot, Some(s))).unzip();
         let mut held = Vec::with_capacity(task_of.iter().filter(|&&t| t == self.task).count());
         for (j, (&p, &to)) in parents.iter().zip(task_of).enumerate() {
-            if to != self.task {
+            if to != self.task || hole(j) {
                 continue;
             }
             let state = match slots.binary_search(&p).ok() {
@@ -277,8 +287,8 @@ mod tests {
         assert_eq!(shards[1].expected_incoming(&parents, &task_of), 2);
         let to = |t: usize| sent.iter().flatten().filter(move |s| s.0 == t).map(|s| (s.1, s.2.clone()));
         let (in0, in1): (Vec<_>, Vec<_>) = (to(0).collect(), to(1).collect());
-        shards[0].adopt(&Walk, 1, &1.0, &parents, &task_of, &[], in0).unwrap();
-        shards[1].adopt(&Walk, 1, &1.0, &parents, &task_of, &[], in1).unwrap();
+        shards[0].adopt(&Walk, 1, &1.0, &parents, &task_of, &[], &[], in0).unwrap();
+        shards[1].adopt(&Walk, 1, &1.0, &parents, &task_of, &[], &[], in1).unwrap();
         for (j, &p) in parents.iter().enumerate() {
             assert_eq!(shards[task_of[j]].state(j), Some(&before[p]), "new slot {j}");
         }
@@ -288,7 +298,7 @@ mod tests {
     #[test]
     fn fresh_slots_are_redrawn_and_the_others_copied() {
         let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1, 2], &vec![0.5], &0.0);
-        shard.adopt(&Walk, 1, &1.0, &[2, 2, 0], &[0, 0, 0], &[1], Vec::new()).unwrap();
+        shard.adopt(&Walk, 1, &1.0, &[2, 2, 0], &[0, 0, 0], &[1], &[], Vec::new()).unwrap();
         assert_eq!(
             shard.held().iter().map(|h| h.1.clone()).collect::<Vec<_>>(),
             vec![vec![0.5], vec![-1.0], vec![0.5]]
@@ -298,7 +308,18 @@ mod tests {
     #[test]
     fn a_missing_transfer_is_an_error_naming_the_slot() {
         let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0], &0.0);
-        let e = shard.adopt(&Walk, 1, &1.0, &[0, 3], &[0, 0], &[], Vec::new()).unwrap_err();
+        let e = shard.adopt(&Walk, 1, &1.0, &[0, 3], &[0, 0], &[], &[], Vec::new()).unwrap_err();
         assert!(e.contains("new slot 1") && e.contains("parent 3"), "{e}");
+    }
+
+    #[test]
+    fn a_hole_is_left_out_and_the_rest_adopted() {
+        // New slot 1's parent was on a task that was lost: the shard goes
+        // on without it rather than waiting for it.
+        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0], &0.0);
+        shard.adopt(&Walk, 1, &1.0, &[0, 3], &[0, 0], &[], &[1], Vec::new()).unwrap();
+        assert_eq!(shard.slots().collect::<Vec<_>>(), vec![0]);
+        let joined: Shard<Walk> = Shard::from_held(1, 9, vec![(4, vec![2.0]), (2, vec![1.0])]);
+        assert_eq!(joined.slots().collect::<Vec<_>>(), vec![2, 4]);
     }
 }

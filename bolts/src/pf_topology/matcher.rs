@@ -6,6 +6,12 @@
 //! updates its particles with the reading. The task holding the best
 //! particle emits its snapshot (the map, for SLAM) every `map_interval`
 //! corrections and at the end.
+//!
+//! A task that replaces one lost with its process (cluster mode) holds
+//! nothing: it says so at once, reports every reading as merely predicted,
+//! and joins when a decision gives it slots, with the states and the
+//! reading its peers send.
+//!
 //! Metrics: `evaluations_per_particle`, `correct_us`, `update_us`,
 //! `particles_received`, and at the end `map_bytes` (the task's particles'
 //! memory, shared tiles counted once).
@@ -39,6 +45,8 @@ struct Plan {
     best: usize,
     /// States this task must receive before it can adopt the new set.
     expected: usize,
+    /// New slots whose states were lost with another task (sorted).
+    holes: Vec<usize>,
     started: Instant,
 }
 
@@ -59,6 +67,16 @@ pub struct Matcher<M: HostedModel> {
     received: Vec<(usize, M::State)>,
     best: usize,
     corrections: u64,
+    /// A replacement for a task lost with its process, not yet joined.
+    replacement: bool,
+    /// Whether the replacement has said it holds nothing.
+    announced: bool,
+    /// A replacement's way into the filter: the decision's plan for it,
+    /// and the reading that comes with the states.
+    joining: Option<(u64, Plan)>,
+    join_reading: Option<Arc<Reading<M::Input>>>,
+    /// Transfers that reached a replacement before their decision.
+    early: Vec<Transfer<M::State, M::Input>>,
 }
 
 impl<M: HostedModel> std::fmt::Debug for Matcher<M> {
@@ -95,7 +113,88 @@ impl<M: HostedModel> Matcher<M> {
             received: Vec::new(),
             best: 0,
             corrections: 0,
+            replacement: false,
+            announced: false,
+            joining: None,
+            join_reading: None,
+            early: Vec::new(),
         })
+    }
+
+    /// A replacement says, once, that it holds nothing.
+    async fn announce(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        if self.replacement && !self.announced {
+            self.announced = true;
+            let (task, tasks) = (self.task as u32, self.tasks as u32);
+            out.emit("report", Report::Lost { task, tasks }).await?;
+        }
+        Ok(())
+    }
+
+    /// A replacement not yet joined takes a decision: it joins if the
+    /// decision gives it slots, else it has nothing to update.
+    async fn replacement_decision(&mut self, decision: &Decision, out: &mut Emitter) -> Result<(), BoxError> {
+        let me = self.task as u32;
+        if decision.lost.is_some() {
+            return Ok(());
+        }
+        let early = std::mem::take(&mut self.early);
+        let (now, later): (Vec<_>, Vec<_>) = early.into_iter().partition(|t| t.step == decision.step);
+        self.early = later.into_iter().filter(|t| t.step > decision.step).collect();
+        if !decision.joining.contains(&me) {
+            let (step, task, tasks) = (decision.step, me, self.tasks as u32);
+            let updated = Report::Updated { step, task, tasks, busy_us: 0, update_work: 0 };
+            return Ok(out.emit("report", updated).await?);
+        }
+        let parents: Vec<usize> = decision.parents.iter().map(|&p| p as usize).collect();
+        let task_of: Vec<usize> = decision.task_of.iter().map(|&t| t as usize).collect();
+        let expected = task_of.iter().filter(|&&t| t == self.task).count();
+        let fresh = decision.fresh.iter().map(|&j| j as usize).collect();
+        let best = decision.best as usize;
+        let plan =
+            Plan { parents, task_of, fresh, best, expected, holes: Vec::new(), started: Instant::now() };
+        self.joining = Some((decision.step, plan));
+        self.received.clear();
+        for transfer in now {
+            self.join_reading = transfer.reading.or(self.join_reading.take());
+            self.received.extend(transfer.states.into_iter().map(|(slot, s)| (slot as usize, s)));
+        }
+        self.join(out).await
+    }
+
+    /// Joins the filter once every state and the reading have come.
+    async fn join(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        let ready = matches!(&self.joining, Some((_, plan)) if self.received.len() >= plan.expected)
+            && self.join_reading.is_some();
+        if !ready {
+            return Ok(());
+        }
+        let (Some((step, plan)), Some(reading)) = (self.joining.take(), self.join_reading.take()) else {
+            return Ok(());
+        };
+        let mut shard = Shard::from_held(self.task, self.seed, Vec::new());
+        let received = self.received.drain(..);
+        shard.adopt(
+            &self.model,
+            step,
+            &reading.input,
+            &plan.parents,
+            &plan.task_of,
+            &plan.fresh,
+            &[],
+            received,
+        )?;
+        out.record("particles_received", plan.expected as u64);
+        let update_work = shard.update(&self.model, &reading.input);
+        self.shard = Some(shard);
+        self.previous = Some(reading);
+        self.gate = M::Gate::default();
+        self.best = plan.best;
+        self.replacement = false;
+        let busy_us = plan.started.elapsed().as_micros() as u64;
+        let (task, tasks) = (self.task as u32, self.tasks as u32);
+        out.emit("report", Report::Updated { step, task, tasks, busy_us, update_work }).await?;
+        self.corrected(out).await
     }
 
     fn settings(&self) -> Settings {
@@ -166,6 +265,24 @@ impl<M: HostedModel> Matcher<M> {
     /// Takes the resampler's decision for the pending correction: sends
     /// the parents' states other tasks need, straight to them.
     async fn plan(&mut self, decision: &Decision, out: &mut Emitter) -> Result<(), BoxError> {
+        if decision.lost.is_some() {
+            // Another task was lost after this decision: the states it was
+            // to send will not come.
+            if let Some(Pending { reading, plan: Some(plan) }) = &mut self.pending
+                && reading.step == decision.step
+            {
+                let mine: Vec<usize> = decision
+                    .holes
+                    .iter()
+                    .map(|&j| j as usize)
+                    .filter(|&j| plan.task_of.get(j) == Some(&self.task))
+                    .collect();
+                plan.expected -= mine.len().min(plan.expected);
+                plan.holes.extend(mine);
+                plan.holes.sort_unstable();
+            }
+            return Ok(());
+        }
         let pending = self.pending.as_mut().ok_or("pf.matcher: a decision with no correction pending")?;
         if decision.step != pending.reading.step {
             let (got, want) = (decision.step, pending.reading.step);
@@ -180,12 +297,14 @@ impl<M: HostedModel> Matcher<M> {
             by_task[to].push((slot as u32, state));
         }
         for (to, states) in by_task.into_iter().enumerate().filter(|(_, s)| !s.is_empty()) {
-            out.send_peer(to, Transfer { step: decision.step, states }).await?;
+            // A joining task never got the reading: it comes with the states.
+            let reading = decision.joining.contains(&(to as u32)).then(|| pending.reading.clone());
+            out.send_peer(to, Transfer { step: decision.step, states, reading }).await?;
         }
         let expected = shard.expected_incoming(&parents, &task_of);
         let fresh = decision.fresh.iter().map(|&j| j as usize).collect();
         let best = decision.best as usize;
-        pending.plan = Some(Plan { parents, task_of, fresh, best, expected, started });
+        pending.plan = Some(Plan { parents, task_of, fresh, best, expected, holes: Vec::new(), started });
         Ok(())
     }
 
@@ -209,6 +328,7 @@ impl<M: HostedModel> Matcher<M> {
             &plan.parents,
             &plan.task_of,
             &plan.fresh,
+            &plan.holes,
             received,
         )?;
         let update_work = shard.update(&self.model, &reading.input);
@@ -244,25 +364,34 @@ impl<M: HostedModel> Bolt for Matcher<M> {
             .input::<Decision>()
             .peer_message(M::transfer_message())
             .output::<Report>("report")
-            .output::<M::Snapshot>("map");
+            .output::<M::Snapshot>("map")
+            // Only a replacement does anything on a tick (it says it holds
+            // nothing, even if no tuple comes).
+            .tick(std::time::Duration::from_millis(200));
     }
 
     async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
-        if ctx.is_replacement() {
-            // The particles it held went with its process; rebuilding them
-            // from the survivors' is not done yet.
-            return Err("pf.matcher: this task's worker was lost with its particles, \
-                        and the particle filter cannot yet rebuild them from the other tasks'"
-                .into());
-        }
         self.task = ctx.task_index();
         self.tasks = ctx.task_count();
         self.seed = ctx.seed();
+        self.replacement = ctx.is_replacement();
         Ok(())
     }
 
+    async fn tick(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        // A replacement may get no tuple while the others wait for it.
+        self.announce(out).await
+    }
+
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        self.announce(out).await?;
         let input = match input.into_arc::<Reading<M::Input>>() {
+            Ok(reading) if self.replacement => {
+                // Nothing to move or correct until it joins.
+                let (step, task, tasks) = (reading.step, self.task as u32, self.tasks as u32);
+                let mark = self.model.mark(&reading.input);
+                return Ok(out.emit("report", Report::Predicted { step, task, tasks, mark }).await?);
+            }
             Ok(reading) => {
                 self.queued.push_back(reading);
                 return self.pump(out).await;
@@ -270,6 +399,7 @@ impl<M: HostedModel> Bolt for Matcher<M> {
             Err(input) => input,
         };
         let input = match input.into_arc::<Decision>() {
+            Ok(decision) if self.replacement => return self.replacement_decision(&decision, out).await,
             Ok(decision) => {
                 self.plan(&decision, out).await?;
                 self.advance(out).await?;
@@ -278,10 +408,23 @@ impl<M: HostedModel> Bolt for Matcher<M> {
             Err(input) => input,
         };
         let transfer = input
-            .into_arc::<Transfer<M::State>>()
+            .into_arc::<Transfer<M::State, M::Input>>()
             .map_err(|_| "pf.matcher takes readings, decisions, transfers")?;
-        let transfer = Arc::try_unwrap(transfer)
-            .unwrap_or_else(|shared| Transfer { step: shared.step, states: shared.states.clone() });
+        let transfer = Arc::try_unwrap(transfer).unwrap_or_else(|shared| Transfer {
+            step: shared.step,
+            states: shared.states.clone(),
+            reading: shared.reading.clone(),
+        });
+        if self.replacement {
+            // A transfer may come before its decision: keep it until then.
+            if !matches!(&self.joining, Some((step, _)) if *step == transfer.step) {
+                self.early.push(transfer);
+                return Ok(());
+            }
+            self.join_reading = transfer.reading.or(self.join_reading.take());
+            self.received.extend(transfer.states.into_iter().map(|(slot, s)| (slot as usize, s)));
+            return self.join(out).await;
+        }
         self.received.extend(transfer.states.into_iter().map(|(slot, s)| (slot as usize, s)));
         self.advance(out).await?;
         self.pump(out).await

@@ -92,6 +92,14 @@ pub enum Report {
         /// Microseconds the task spent correcting.
         busy_us: u64,
     },
+    /// This task replaces one whose particles were lost with its process
+    /// (cluster mode): it holds nothing until a decision has it join.
+    Lost {
+        /// The reporting task.
+        task: u32,
+        /// Matcher tasks.
+        tasks: u32,
+    },
     /// The task adopted the new set and updated it with the reading.
     Updated {
         /// The reading.
@@ -105,6 +113,18 @@ pub enum Report {
         /// Work the updates counted (map tiles cloned, for SLAM).
         update_work: u64,
     },
+}
+
+impl Report {
+    /// The reading and the reporting task, for reports about a reading.
+    pub fn step_and_task(&self) -> Option<(u64, u32)> {
+        match self {
+            Report::Predicted { step, task, .. }
+            | Report::Corrected { step, task, .. }
+            | Report::Updated { step, task, .. } => Some((*step, *task)),
+            Report::Started { .. } | Report::Lost { .. } => None,
+        }
+    }
 }
 
 /// Resampler → every matcher task (feedback): the new particle set and
@@ -121,16 +141,47 @@ pub struct Decision {
     pub best: u32,
     /// New slots redrawn at random (augmented MCL), in order.
     pub fresh: Vec<u32>,
+    /// Tasks that hold nothing (their particles were lost) and take up
+    /// their new slots with this decision; their senders add the reading.
+    pub joining: Vec<u32>,
+    /// Set on a notice, not a decision: this task was lost after the
+    /// decision for `step`, so the new slots in `holes` will not come;
+    /// tasks waiting for them go on without them.
+    pub lost: Option<u32>,
+    /// With `lost`: the new slots whose states went with the lost task.
+    pub holes: Vec<u32>,
+}
+
+impl Decision {
+    /// The notice that `task` was lost after the decision for `step`.
+    pub fn lost_notice(step: u64, task: u32, holes: Vec<u32>) -> Self {
+        Decision {
+            step,
+            parents: Vec::new(),
+            task_of: Vec::new(),
+            best: 0,
+            fresh: Vec::new(),
+            joining: Vec::new(),
+            lost: Some(task),
+            holes,
+        }
+    }
 }
 
 /// Matcher task → matcher task (peer exchange): parents' states for new
 /// slots the receiver holds from now on. In-process the states' maps share
 /// their tiles with the sender's.
 #[derive(Debug, Serialize, Deserialize)]
-#[serde(bound(serialize = "S: Serialize", deserialize = "S: serde::de::DeserializeOwned"))]
-pub struct Transfer<S> {
+#[serde(bound(
+    serialize = "S: Serialize, I: Serialize",
+    deserialize = "S: serde::de::DeserializeOwned, I: serde::de::DeserializeOwned"
+))]
+pub struct Transfer<S, I> {
     /// The reading whose decision this carries out.
     pub step: u64,
     /// (new slot, state).
     pub states: Vec<(u32, S)>,
+    /// The reading itself, for a task joining with this decision (it
+    /// never got it: it replaces one that was lost).
+    pub reading: Option<Arc<Reading<I>>>,
 }

@@ -53,7 +53,7 @@ pub trait HostedModel: ParticleModel<Input: Message, State: Message> + Sized {
     /// model whose states are large makes them cross processes
     /// incrementally.
     fn transfer_message() -> MessageType {
-        MessageType::of::<messages::Transfer<Self::State>>()
+        MessageType::of::<messages::Transfer<Self::State, Self::Input>>()
     }
 
     /// Bytes the states take together (shared parts counted once).
@@ -77,7 +77,7 @@ impl HostedModel for SlamModel {
     }
 
     fn transfer_message() -> MessageType {
-        MessageType::incremental::<messages::Transfer<SlamParticle>>()
+        MessageType::incremental::<messages::Transfer<SlamParticle, LaserReading>>()
     }
 
     fn memory<'a>(&self, states: impl Iterator<Item = &'a SlamParticle>) -> u64 {
@@ -155,6 +155,10 @@ macro_rules! per_model {
 
             async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
                 match self { $($name::$variant(b) => b.execute(input, out).await,)+ }
+            }
+
+            async fn tick(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+                match self { $($name::$variant(b) => b.tick(out).await,)+ }
             }
 
             async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {

@@ -10,6 +10,16 @@
 //! `imbalance_us` (slowest matcher task's correction minus the mean: seed
 //! 003's t_max − t_mean), `tiles_cloned`, and `bytes_moved_round_robin`:
 //! what placing new slot j on task j mod K would have moved.
+//!
+//! A matcher task lost with its process (cluster mode) is replaced by one
+//! that holds nothing and says so (`Report::Lost`). Its particles are then
+//! lost: they weigh nothing, and until the replacement reports for itself
+//! it counts as heard. If the loss comes after a decision, the tasks still
+//! waiting for states the lost task was to send are told to go on without
+//! them (those slots are lost too). The next correction resamples, whatever
+//! Neff, from the particles left, and the replacement joins with its share
+//! of the new set, sent by the others with the reading. Metric:
+//! `particles_lost`.
 
 use std::time::Instant;
 
@@ -57,6 +67,10 @@ fn default_turn() -> Real {
 struct Gathered {
     step: u64,
     tasks_heard: usize,
+    /// Which tasks have been heard (or stand in as lost).
+    heard_from: Vec<bool>,
+    /// Whether a task corrected (rather than only predicted).
+    corrected: bool,
     slots: Vec<SlotReport>,
     busy_us: Vec<u64>,
     update_work: u64,
@@ -79,6 +93,21 @@ pub struct Resampler {
     gathered: Gathered,
     /// (modes kept, radius, turn) for `hypotheses`.
     modes: (usize, Real, Real),
+    /// Tasks whose replacement has not reported for itself yet: they count
+    /// as heard.
+    standing_in: Vec<bool>,
+    /// Tasks that hold no particles until a decision has them join.
+    empty: Vec<bool>,
+    /// Slots whose states were lost, until the next decision replaces them.
+    dead: Vec<bool>,
+    /// After a decision, until every task has updated: (step, parents,
+    /// the tasks that held the parents).
+    deciding: Option<(u64, Vec<usize>, Vec<usize>)>,
+    /// The last reading every task was heard for.
+    done: Option<u64>,
+    /// Tasks that were lost (their replacements' reports for readings
+    /// already done are late, and dropped).
+    replaced: Vec<bool>,
 }
 
 impl Resampler {
@@ -100,6 +129,12 @@ impl Resampler {
             marks: Vec::new(),
             gathered: Gathered::default(),
             modes: (params.hypotheses, params.mode_radius, params.mode_turn),
+            standing_in: Vec::new(),
+            empty: Vec::new(),
+            dead: Vec::new(),
+            deciding: None,
+            done: None,
+            replaced: Vec::new(),
         })
     }
 
@@ -118,8 +153,110 @@ impl Resampler {
             return Err(format!("pf.resampler: a report for reading {step} while gathering {had}").into());
         }
         self.gathered.step = step;
-        self.gathered.tasks_heard += 1;
+        if self.gathered.heard_from.len() != tasks {
+            self.gathered.heard_from = vec![false; tasks];
+        }
+        let first_own = self.standing_in.get(task as usize).copied().unwrap_or(false);
+        if first_own {
+            // The replacement reports for itself from now on.
+            self.standing_in[task as usize] = false;
+        }
+        if !std::mem::replace(&mut self.gathered.heard_from[task as usize], true) {
+            self.gathered.tasks_heard += 1;
+        } else if !first_own {
+            return Err(format!("pf.resampler: task {task} reported twice for reading {step}").into());
+        }
+        self.stand_in();
         Ok(self.gathered.tasks_heard == tasks)
+    }
+
+    /// Counts the tasks that stand in as lost as heard.
+    fn stand_in(&mut self) {
+        let g = &mut self.gathered;
+        for (t, &standing) in self.standing_in.iter().enumerate() {
+            if standing && g.heard_from.get(t) == Some(&false) {
+                g.heard_from[t] = true;
+                g.tasks_heard += 1;
+            }
+        }
+    }
+
+    /// A replacement says task `task`'s particles were lost.
+    async fn lost(&mut self, task: usize, tasks: usize, out: &mut Emitter) -> Result<(), BoxError> {
+        if self.tasks != Some(tasks) || task >= tasks || self.population.is_none() {
+            return Err(format!("pf.resampler: task {task} of {tasks} lost before the filter started").into());
+        }
+        self.standing_in.resize(tasks, false);
+        self.empty.resize(tasks, false);
+        if self.empty[task] {
+            return Ok(());
+        }
+        self.standing_in[task] = true;
+        self.empty[task] = true;
+        self.replaced.resize(tasks, false);
+        self.replaced[task] = true;
+        if self.empty.iter().all(|&e| e) {
+            return Err("pf.resampler: every matcher task lost its particles".into());
+        }
+        let population = self.population.as_mut().expect("checked");
+        self.dead.resize(population.len(), false);
+        let mut holes = Vec::new();
+        if let Some((step, parents, holders)) = &self.deciding {
+            // States the lost task was to send will not come.
+            for (j, (&p, &to)) in parents.iter().zip(&self.task_of).enumerate() {
+                if to != task && holders[p] == task {
+                    holes.push(j as u32);
+                    self.dead[j] = true;
+                }
+            }
+            out.emit("decision", Decision::lost_notice(*step, task as u32, holes.clone())).await?;
+        }
+        for (slot, &t) in self.task_of.iter().enumerate() {
+            if t == task {
+                self.dead[slot] = true;
+            }
+        }
+        let mut lost = 0;
+        for (slot, &dead) in self.dead.iter().enumerate() {
+            if dead {
+                population.lose(slot);
+                lost += 1;
+            }
+        }
+        out.count("particles_lost", lost);
+        tracing::warn!("pf.resampler: matcher task {task} was lost; {lost} particles are gone");
+        let in_progress = self.gathered.tasks_heard > 0 || self.deciding.is_some();
+        if in_progress {
+            if self.gathered.heard_from.len() != tasks {
+                self.gathered.heard_from = vec![false; tasks];
+            }
+            self.stand_in();
+            if self.gathered.tasks_heard == tasks {
+                self.complete(out).await?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Every task has been heard for the current reading: decide, or let
+    /// the dispatcher go on.
+    async fn complete(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        if let Some((step, _, _)) = self.deciding.take() {
+            self.done = Some(step);
+            out.count("tiles_cloned", self.gathered.update_work);
+            self.gathered = Gathered::default();
+            out.emit("ready", Ready { step, corrected: true }).await?;
+        } else if self.gathered.corrected {
+            self.decide(out).await?;
+        } else {
+            let g = std::mem::take(&mut self.gathered);
+            self.done = Some(g.step);
+            let mark = g.mark.ok_or("pf.resampler: a reading without its mark")?;
+            self.marks.push(mark);
+            self.emit_estimate(mark, out).await?;
+            out.emit("ready", Ready { step: g.step, corrected: false }).await?;
+        }
+        Ok(())
     }
 
     async fn emit_estimate(&self, mark: (f64, Pose2), out: &mut Emitter) -> Result<(), BoxError> {
@@ -136,6 +273,22 @@ impl Resampler {
         let mark = g.mark.ok_or("pf.resampler: a correction without its reading")?;
         let population = self.population.as_mut().ok_or("pf.resampler: a correction before the start")?;
         let mut slots = g.slots;
+        self.dead.resize(population.len(), false);
+        for (slot, _) in self.dead.iter().enumerate().filter(|(_, d)| **d) {
+            if slots.iter().all(|s| s.slot != slot) {
+                let pose = population.node(slot).pose;
+                let nothing = Real::NEG_INFINITY;
+                slots.push(SlotReport {
+                    slot,
+                    pose,
+                    log_likelihood: nothing,
+                    evaluations: 0,
+                    bytes: 0,
+                    fit: nothing,
+                });
+            }
+        }
+        let any_dead = self.dead.iter().any(|&d| d);
         slots.sort_by_key(|s| s.slot);
         if slots.len() != population.len() || slots.iter().enumerate().any(|(i, s)| s.slot != i) {
             return Err(format!(
@@ -153,11 +306,13 @@ impl Resampler {
             mark,
             &poses,
             settings.smoothing,
-            settings.threshold,
+            // Lost particles are replaced now, whatever Neff.
+            if any_dead { Real::INFINITY } else { settings.threshold },
             settings.scheme,
             settings.injection.map(|i| (i, &fits[..])),
         );
         let tasks = self.tasks.unwrap_or(1);
+        let holders = self.task_of.clone();
         if d.resampled {
             let placements: Vec<Placement> = d
                 .parents
@@ -181,12 +336,23 @@ impl Resampler {
         let mean = g.busy_us.iter().sum::<u64>() as f64 / g.busy_us.len().max(1) as f64;
         let slowest = g.busy_us.iter().copied().max().unwrap_or(0);
         out.record("imbalance_us", (slowest as f64 - mean).max(0.0) as u64);
+        self.empty.resize(tasks, false);
+        let joining: Vec<u32> =
+            (0..tasks).filter(|&t| self.empty[t] && self.task_of.contains(&t)).map(|t| t as u32).collect();
+        for &t in &joining {
+            self.empty[t as usize] = false;
+        }
+        self.dead.iter_mut().for_each(|d| *d = false);
+        self.deciding = Some((g.step, d.parents.clone(), holders));
         let decision = Decision {
             step: g.step,
             parents: d.parents.iter().map(|&p| p as u32).collect(),
             task_of: self.task_of.iter().map(|&t| t as u32).collect(),
             best: d.best as u32,
             fresh: d.fresh.iter().map(|&j| j as u32).collect(),
+            joining,
+            lost: None,
+            holes: Vec::new(),
         };
         out.record("injected", d.fresh.len() as u64);
         self.marks.push(mark);
@@ -218,6 +384,13 @@ impl Bolt for Resampler {
 
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         let report = input.get::<Report>().ok_or("pf.resampler takes matcher reports")?;
+        if let Some((step, task)) = report.step_and_task()
+            && self.done.is_some_and(|done| step <= done)
+            && self.replaced.get(task as usize) == Some(&true)
+        {
+            // A replacement's report for a reading its stand-in covered.
+            return Ok(());
+        }
         match report {
             Report::Started { task, tasks, mark, poses, particles, settings } => {
                 self.gathered.starts.extend(poses.iter().map(|&(slot, p)| (slot as usize, p)));
@@ -242,13 +415,11 @@ impl Bolt for Resampler {
                 out.emit("ready", Ready { step: 0, corrected: true }).await?;
             }
             Report::Predicted { step, task, tasks, mark } => {
-                if !self.heard(*step, *task, *tasks)? {
-                    return Ok(());
+                let all = self.heard(*step, *task, *tasks)?;
+                self.gathered.mark = Some(*mark);
+                if all {
+                    self.complete(out).await?;
                 }
-                self.gathered = Gathered::default();
-                self.marks.push(*mark);
-                self.emit_estimate(*mark, out).await?;
-                out.emit("ready", Ready { step: *step, corrected: false }).await?;
             }
             Report::Corrected { step, task, tasks, mark, slots, busy_us } => {
                 let all = self.heard(*step, *task, *tasks)?;
@@ -256,19 +427,19 @@ impl Bolt for Resampler {
                 g.slots.extend_from_slice(slots);
                 g.busy_us.push(*busy_us);
                 g.mark = Some(*mark);
+                g.corrected = true;
                 if all {
-                    self.decide(out).await?;
+                    self.complete(out).await?;
                 }
             }
             Report::Updated { step, task, tasks, update_work, .. } => {
                 let all = self.heard(*step, *task, *tasks)?;
                 self.gathered.update_work += update_work;
                 if all {
-                    out.count("tiles_cloned", self.gathered.update_work);
-                    self.gathered = Gathered::default();
-                    out.emit("ready", Ready { step: *step, corrected: true }).await?;
+                    self.complete(out).await?;
                 }
             }
+            Report::Lost { task, tasks } => self.lost(*task as usize, *tasks as usize, out).await?,
         }
         Ok(())
     }

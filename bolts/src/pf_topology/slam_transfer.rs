@@ -7,7 +7,10 @@ use serde::{Deserialize, Serialize};
 use squall_topology::Incremental;
 
 use crate::geometry::Pose2;
-use crate::pf_topology::messages::Transfer;
+use std::sync::Arc;
+
+use crate::pf_topology::messages::{Reading, Transfer};
+use crate::sensor::LaserReading;
 use crate::slam::model::SlamParticle;
 use crate::slam::transfer::{PackedGrid, Sent, TileStore, pack};
 
@@ -16,16 +19,18 @@ use crate::slam::transfer::{PackedGrid, Sent, TileStore, pack};
 struct PackedTransfer {
     step: u64,
     states: Vec<(u32, Pose2, PackedGrid)>,
+    reading: Option<Arc<Reading<LaserReading>>>,
 }
 
-impl Incremental for Transfer<SlamParticle> {
+impl Incremental for Transfer<SlamParticle, LaserReading> {
     type Sent = Sent;
     type Held = TileStore;
 
     fn encode_incremental(&self, sent: &mut Sent) -> Result<Vec<u8>, String> {
         let states = self.states.iter().map(|(slot, p)| (*slot, p.pose, pack(&p.map, sent))).collect();
         sent.end_message();
-        postcard::to_stdvec(&PackedTransfer { step: self.step, states }).map_err(|e| e.to_string())
+        let packed = PackedTransfer { step: self.step, states, reading: self.reading.clone() };
+        postcard::to_stdvec(&packed).map_err(|e| e.to_string())
     }
 
     fn decode_incremental(bytes: &[u8], held: &mut TileStore) -> Result<Self, String> {
@@ -37,7 +42,11 @@ impl Incremental for Transfer<SlamParticle> {
             .collect::<Result<Vec<_>, crate::slam::transfer::UnpackError>>();
         // The sender ended its message whatever it held; so does the store.
         held.end_message();
-        Ok(Transfer { step: packed.step, states: states.map_err(|e| e.to_string())? })
+        Ok(Transfer {
+            step: packed.step,
+            states: states.map_err(|e| e.to_string())?,
+            reading: packed.reading,
+        })
     }
 }
 
@@ -58,9 +67,10 @@ mod tests {
     fn a_parent_sent_twice_crosses_whole_once() {
         let (mut sent, mut held) = (Sent::default(), TileStore::default());
         let parent = particle(1.0, 400);
-        let first = Transfer { step: 3, states: vec![(0, parent.clone()), (5, parent.clone())] };
+        let first =
+            Transfer { step: 3, states: vec![(0, parent.clone()), (5, parent.clone())], reading: None };
         let bytes = first.encode_incremental(&mut sent).unwrap();
-        let back = Transfer::<SlamParticle>::decode_incremental(&bytes, &mut held).unwrap();
+        let back = Transfer::<SlamParticle, LaserReading>::decode_incremental(&bytes, &mut held).unwrap();
         assert_eq!(back.step, 3);
         assert_eq!(back.states.iter().map(|s| s.0).collect::<Vec<_>>(), vec![0, 5]);
         assert_eq!(back.states[1].1.pose, parent.pose);
@@ -68,11 +78,14 @@ mod tests {
         let plain = postcard::to_stdvec(&first).unwrap().len();
         // The second state refers to the first's tiles.
         assert!(bytes.len() * 3 < plain * 2, "{} vs {plain}", bytes.len());
-        let again = Transfer { step: 4, states: vec![(2, parent)] };
+        let again = Transfer { step: 4, states: vec![(2, parent)], reading: None };
         let second = again.encode_incremental(&mut sent).unwrap();
         assert!(second.len() * 20 < bytes.len(), "{} vs {}", second.len(), bytes.len());
-        assert!(Transfer::<SlamParticle>::decode_incremental(&second, &mut held).is_ok());
+        assert!(Transfer::<SlamParticle, LaserReading>::decode_incremental(&second, &mut held).is_ok());
         // Another receiver, which holds nothing, cannot resolve it.
-        assert!(Transfer::<SlamParticle>::decode_incremental(&second, &mut TileStore::default()).is_err());
+        assert!(
+            Transfer::<SlamParticle, LaserReading>::decode_incremental(&second, &mut TileStore::default())
+                .is_err()
+        );
     }
 }
