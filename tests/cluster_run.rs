@@ -325,3 +325,36 @@ fn slam_goes_on_when_a_matcher_s_worker_is_lost_halfway_and_stays_as_accurate() 
     eprintln!("ACES relations error: {whole:.4} m unbroken, {survived:.4} m after losing a worker");
     assert!(survived <= 1.2 * whole, "{survived:.4} m after the loss against {whole:.4} m unbroken");
 }
+
+#[test]
+fn local_or_shuffle_stays_in_the_producer_s_process() {
+    let workers = Workers::start(2);
+    let cluster = workers.cluster_file("relay = [\"w1\", \"w2\"]\nsink = [\"w1\", \"w2\"]");
+    let crossed = |grouping: &str| {
+        let out = tempfile::tempdir().unwrap();
+        let done = squall(&[
+            "run",
+            "examples/topologies/probe.toml",
+            "--set",
+            "source.params.count=2000",
+            "--set",
+            "relay.parallelism=2",
+            "--set",
+            "sink.parallelism=2",
+            "--set",
+            &format!("sink.inputs.0.grouping=\"{grouping}\""),
+            "--quiet",
+            "--out",
+            out.path().to_str().unwrap(),
+            "--cluster",
+            cluster.to_str().unwrap(),
+        ]);
+        assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+        let m = metrics(out.path());
+        assert_eq!(component(&m, "sink")["received"], 2000, "{m}");
+        let edges = m["edges"].as_array().unwrap();
+        edges.iter().filter(|e| e["from"] == "relay").map(|e| e["messages"].as_u64().unwrap()).sum::<u64>()
+    };
+    assert_eq!(crossed("local_or_shuffle"), 0, "each relay task has a sink task beside it");
+    assert!(crossed("shuffle") > 0, "shuffle spreads over both processes");
+}

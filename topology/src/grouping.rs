@@ -18,8 +18,9 @@ pub enum Grouping {
     Global,
     /// The emitter names the task (`Emitter::emit_direct`).
     Direct,
-    /// A task in the producer's own process if there is one, else shuffle.
-    /// In-process every task is local, so this is shuffle.
+    /// Shuffle over the consumer tasks in the producer's own process if
+    /// there are any, else over all of them. In-process every task is
+    /// local, so this is shuffle.
     LocalOrShuffle,
 }
 

@@ -174,8 +174,14 @@ impl Wiring {
                         if input.from != p.spec.name || input.stream != decl.name {
                             continue;
                         }
-                        let targets: Vec<Target> =
+                        let mut targets: Vec<Target> =
                             (0..consumer.spec.parallelism).map(|to| queue(ci, ii, to)).collect();
+                        if input.grouping == Grouping::LocalOrShuffle
+                            && targets.iter().any(|t| matches!(t, Target::Local(_)))
+                        {
+                            // Only the consumer tasks in this process.
+                            targets.retain(|t| matches!(t, Target::Local(_)));
+                        }
                         let route = match &input.grouping {
                             Grouping::Shuffle | Grouping::LocalOrShuffle => Route::RoundRobin,
                             Grouping::Fields(f) => Route::Fields(static_fields(decl.message.fields(), f)),
