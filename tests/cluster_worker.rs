@@ -7,9 +7,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use squall::topology::cluster::config::{Endpoint, Protocol};
-use squall::topology::cluster::session::{
-    SessionOptions, announce_coordinator, open, ping, watch_workers, worker_key,
-};
+use squall::topology::cluster::session::{SessionOptions, open, ping, watch_workers, worker_key};
 
 fn free_endpoint() -> Endpoint {
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
@@ -68,38 +66,4 @@ fn a_worker_with_a_bad_endpoint_says_what_was_expected() {
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("tls/ needs --tls-ca, --tls-cert and --tls-key"), "{stderr}");
-}
-
-#[test]
-fn a_worker_does_not_outlive_its_coordinator() {
-    let (endpoint, mut child, runtime) = worker(Stdio::piped());
-    runtime.block_on(async {
-        let options = SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() };
-        let coordinator = open(&options).await.unwrap();
-        let token = announce_coordinator(&coordinator).await.unwrap();
-        ping(&coordinator, &endpoint, Duration::from_secs(20)).await.expect("the worker answers");
-        // Give the token time to reach the worker, then the coordinator
-        // goes as a killed one would: its links close.
-        tokio::time::sleep(Duration::from_millis(500)).await;
-        drop(token);
-        coordinator.close().await.unwrap();
-    });
-    let gone = std::time::Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break Some(status);
-        }
-        if gone.elapsed() > Duration::from_secs(5) {
-            let _ = child.kill();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
-    let status =
-        status.unwrap_or_else(|| panic!("the worker was still running 5 s after its coordinator: {stderr}"));
-    assert!(status.success(), "{status}: {stderr}");
-    assert!(stderr.contains("the coordinator is gone"), "{stderr}");
-    eprintln!("worker exited {:.2} s after its coordinator", gone.elapsed().as_secs_f64());
 }

@@ -126,8 +126,8 @@ pub fn reply_key(endpoint: &Endpoint) -> String {
 pub enum StopReason {
     /// A coordinator sent `Stop`.
     Told,
-    /// Every coordinator it had seen is gone (killed, or its link lost):
-    /// a worker does not outlive its run.
+    /// The coordinator of a run it hosts is gone before the run was over
+    /// (killed, or its link lost): a worker does not outlive its run.
     CoordinatorLost,
 }
 
@@ -141,11 +141,12 @@ pub struct WorkerPresence {
     stop: tokio::sync::watch::Receiver<Option<StopReason>>,
     runs: tokio::sync::mpsc::UnboundedReceiver<Box<RunPlan>>,
     endpoint: Endpoint,
-    released: Released,
+    hosting: Hosting,
 }
 
-/// Coordinators whose runs are over: their going does not stop the worker.
-type Released = Arc<std::sync::Mutex<std::collections::HashSet<String>>>;
+/// The coordinators whose runs the worker hosts: if one goes, the worker
+/// stops. Others' comings and goings are none of its business.
+type Hosting = Arc<std::sync::Mutex<std::collections::HashSet<String>>>;
 
 impl WorkerPresence {
     /// Opens the worker's session on `options.listen[0]` and announces it.
@@ -161,8 +162,9 @@ impl WorkerPresence {
         let rejections = Arc::new(Rejections::default());
         let (stopped, stop) = tokio::sync::watch::channel(None);
         let stopped = Arc::new(stopped);
-        let released: Released = Arc::default();
-        watch_coordinators(&session, stopped.clone(), released.clone()).await?;
+        let hosting: Hosting = Arc::default();
+        watch_coordinators(&session, stopped.clone(), hosting.clone()).await?;
+        let hosted = hosting.clone();
         let (answer, counts, name) = (session.clone(), rejections.clone(), worker_key(&endpoint));
         let (plans, runs) = tokio::sync::mpsc::unbounded_channel();
         let me = endpoint.clone();
@@ -181,6 +183,7 @@ impl WorkerPresence {
                         let _ = stopped.send(Some(StopReason::Told));
                     }
                     Ok(Frame::Control(Control::Start(plan))) => {
+                        hosted.lock().unwrap_or_else(|e| e.into_inner()).insert(plan.coordinator.clone());
                         let _ = plans.send(plan);
                     }
                     Ok(other) => tracing::warn!("worker {name}: unexpected on the control key: {other:?}"),
@@ -191,15 +194,15 @@ impl WorkerPresence {
                 }
             }
         });
-        Ok(WorkerPresence { session, rejections, stop, runs, endpoint: me, released })
+        Ok(WorkerPresence { session, rejections, stop, runs, endpoint: me, hosting })
     }
 
     /// A function that lets the worker outlive a coordinator whose run is
     /// over (for [`crate::cluster::run::host_run`]).
     pub fn releaser(&self) -> impl Fn(&str) + Send + 'static {
-        let released = self.released.clone();
+        let hosting = self.hosting.clone();
         move |coordinator: &str| {
-            released.lock().unwrap_or_else(|e| e.into_inner()).insert(coordinator.to_string());
+            hosting.lock().unwrap_or_else(|e| e.into_inner()).remove(coordinator);
         }
     }
 
@@ -247,21 +250,18 @@ pub fn coordinator_id(session: &Session) -> String {
     session.zid().to_string()
 }
 
-/// Follows the coordinators' tokens; once every one seen is gone, except
-/// those that released the worker, tells the worker to stop.
+/// Follows the coordinators' tokens; when the coordinator of a run the
+/// worker hosts goes, tells the worker to stop.
 async fn watch_coordinators(
     session: &Session,
     stopped: Arc<tokio::sync::watch::Sender<Option<StopReason>>>,
-    released: Released,
+    hosting: Hosting,
 ) -> Result<(), SessionError> {
     let mut tokens = watch_tokens(session, COORDINATORS).await?;
     tokio::spawn(async move {
-        let mut alive = std::collections::HashSet::new();
         while let Some((key, up)) = tokens.recv().await {
-            let was_released = || released.lock().unwrap_or_else(|e| e.into_inner()).remove(&key);
-            if up {
-                alive.insert(key);
-            } else if alive.remove(&key) && !was_released() && alive.is_empty() {
+            let hosts_its_run = || hosting.lock().unwrap_or_else(|e| e.into_inner()).contains(&key);
+            if !up && hosts_its_run() {
                 tracing::warn!("worker: the coordinator {key} is gone; stopping");
                 let _ = stopped.send(Some(StopReason::CoordinatorLost));
             }
@@ -396,6 +396,24 @@ mod tests {
         let (endpoint, worker, coordinator) = worker_and_coordinator().await;
         let token = announce_coordinator(&coordinator).await.unwrap();
         ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
+        // The worker hosts one of its runs.
+        let plan = RunPlan {
+            run: "squall/test/run/1".into(),
+            file: "t.toml".into(),
+            topology: String::new(),
+            hosts: Vec::new(),
+            host: 1,
+            host_count: 2,
+            coordinator: coordinator_id(&coordinator),
+        };
+        coordinator
+            .put(control_key(&endpoint), Frame::Control(Control::Start(Box::new(plan))).encode())
+            .await
+            .unwrap();
+        let mut worker = worker;
+        let shipped =
+            tokio::time::timeout(Duration::from_secs(10), worker.next_run()).await.unwrap().unwrap();
+        assert_eq!(shipped.coordinator, coordinator_id(&coordinator));
         // Once the worker's side sees the coordinator's token, it dies.
         let seen = async {
             loop {
@@ -411,5 +429,17 @@ mod tests {
         coordinator.close().await.unwrap();
         let reason = tokio::time::timeout(Duration::from_secs(10), worker.stopped()).await.unwrap();
         assert_eq!(reason, StopReason::CoordinatorLost);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_worker_outlives_coordinators_whose_runs_it_does_not_host() {
+        let (endpoint, worker, coordinator) = worker_and_coordinator().await;
+        let token = announce_coordinator(&coordinator).await.unwrap();
+        ping(&coordinator, &endpoint, Duration::from_secs(10)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        drop(token);
+        coordinator.close().await.unwrap();
+        let stopped = tokio::time::timeout(Duration::from_secs(1), worker.stopped()).await;
+        assert!(stopped.is_err(), "a coordinator that shipped no run stopped the worker");
     }
 }
