@@ -194,7 +194,10 @@ impl<M: HostedModel> Matcher<M> {
         let busy_us = plan.started.elapsed().as_micros() as u64;
         let (task, tasks) = (self.task as u32, self.tasks as u32);
         out.emit("report", Report::Updated { step, task, tasks, busy_us, update_work }).await?;
-        self.corrected(out).await
+        self.corrected(out).await?;
+        // Readings that came while it joined: those after the join's.
+        self.queued.retain(|r| r.step > step);
+        self.pump(out).await
     }
 
     fn settings(&self) -> Settings {
@@ -386,6 +389,11 @@ impl<M: HostedModel> Bolt for Matcher<M> {
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         self.announce(out).await?;
         let input = match input.into_arc::<Reading<M::Input>>() {
+            Ok(reading) if self.replacement && self.joining.is_some() => {
+                // Joining: the reading waits for the states.
+                self.queued.push_back(reading);
+                return Ok(());
+            }
             Ok(reading) if self.replacement => {
                 // Nothing to move or correct until it joins.
                 let (step, task, tasks) = (reading.step, self.task as u32, self.tasks as u32);

@@ -274,6 +274,35 @@ impl Resampler {
         let population = self.population.as_mut().ok_or("pf.resampler: a correction before the start")?;
         let mut slots = g.slots;
         self.dead.resize(population.len(), false);
+        if self.replaced.iter().any(|&r| r) {
+            // After a loss, a slot nobody reported is lost too (a state in
+            // flight to or from the lost task), and a task that reported
+            // none of its slots holds nothing: it joins with this decision.
+            let mut reported = vec![false; population.len()];
+            for s in &slots {
+                if let Some(r) = reported.get_mut(s.slot) {
+                    *r = true;
+                }
+            }
+            let mut newly = 0;
+            for (slot, dead) in self.dead.iter_mut().enumerate() {
+                if !reported[slot] && !*dead {
+                    *dead = true;
+                    population.lose(slot);
+                    newly += 1;
+                }
+            }
+            if newly > 0 {
+                out.count("particles_lost", newly);
+                for (t, empty) in self.empty.iter_mut().enumerate() {
+                    let held = self.task_of.iter().enumerate().filter(|&(_, &h)| h == t);
+                    if held.clone().count() > 0 && held.clone().all(|(slot, _)| !reported[slot]) {
+                        *empty = true;
+                    }
+                }
+                tracing::warn!("pf.resampler: {newly} more particles were lost after a matcher task was");
+            }
+        }
         for (slot, _) in self.dead.iter().enumerate().filter(|(_, d)| **d) {
             if slots.iter().all(|s| s.slot != slot) {
                 let pose = population.node(slot).pose;
@@ -385,11 +414,16 @@ impl Bolt for Resampler {
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         let report = input.get::<Report>().ok_or("pf.resampler takes matcher reports")?;
         if let Some((step, task)) = report.step_and_task()
-            && self.done.is_some_and(|done| step <= done)
             && self.replaced.get(task as usize) == Some(&true)
         {
-            // A replacement's report for a reading its stand-in covered.
-            return Ok(());
+            let updated = matches!(report, Report::Updated { .. });
+            let late = self.done.is_some_and(|done| step <= done)
+                // A reading's report once its decision is out, or an update
+                // when no decision is: its stand-in covered it.
+                || (self.deciding.as_ref().is_some_and(|d| d.0 == step) != updated);
+            if late {
+                return Ok(());
+            }
         }
         match report {
             Report::Started { task, tasks, mark, poses, particles, settings } => {
