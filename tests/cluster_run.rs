@@ -315,14 +315,17 @@ fn slam_goes_on_when_a_matcher_s_worker_is_lost_halfway_and_stays_as_accurate() 
     let m = metrics(broken.path());
     let warnings = m["warnings"].to_string();
     assert!(warnings.contains("was lost") && warnings.contains("matcher 1"), "{warnings}");
-    // Its 10 particles were lost and replaced from the 20 left.
-    let lost = &component(&m, "resampler")["custom"]["particles_lost"];
-    assert_eq!(lost, 10, "{m}");
+    // Its 10 particles were lost (and any whose states were on their way
+    // to or from it), and replaced from those left.
+    let lost = component(&m, "resampler")["custom"]["particles_lost"].as_u64().unwrap_or(0);
+    assert!((10..30).contains(&lost), "{lost} particles reported lost: {m}");
     let (whole, survived) = (
         aces_error(&unbroken.path().join("trajectory.tum")),
         aces_error(&broken.path().join("trajectory.tum")),
     );
-    eprintln!("ACES relations error: {whole:.4} m unbroken, {survived:.4} m after losing a worker");
+    eprintln!(
+        "ACES relations error: {whole:.4} m unbroken, {survived:.4} m after losing a worker ({lost} particles)"
+    );
     assert!(survived <= 1.2 * whole, "{survived:.4} m after the loss against {whole:.4} m unbroken");
 }
 

@@ -50,6 +50,21 @@ struct Plan {
     started: Instant,
 }
 
+impl Plan {
+    /// Has `shard` take up this plan's new set for reading `step`, with the
+    /// states `received` from other tasks.
+    fn adopt<M: HostedModel>(
+        &self,
+        model: &M,
+        shard: &mut Shard<M>,
+        step: u64,
+        input: &M::Input,
+        received: impl IntoIterator<Item = (usize, M::State)>,
+    ) -> Result<(), String> {
+        shard.adopt(model, step, input, &self.parents, &self.task_of, &self.fresh, &self.holes, received)
+    }
+}
+
 /// The matcher for model `M`.
 pub struct Matcher<M: HostedModel> {
     model: M,
@@ -173,17 +188,7 @@ impl<M: HostedModel> Matcher<M> {
             return Ok(());
         };
         let mut shard = Shard::from_held(self.task, self.seed, Vec::new());
-        let received = self.received.drain(..);
-        shard.adopt(
-            &self.model,
-            step,
-            &reading.input,
-            &plan.parents,
-            &plan.task_of,
-            &plan.fresh,
-            &[],
-            received,
-        )?;
+        plan.adopt(&self.model, &mut shard, step, &reading.input, self.received.drain(..))?;
         out.record("particles_received", plan.expected as u64);
         let update_work = shard.update(&self.model, &reading.input);
         self.shard = Some(shard);
@@ -323,17 +328,7 @@ impl<M: HostedModel> Matcher<M> {
         let shard = self.shard.as_mut().ok_or("pf.matcher: no particles yet")?;
         out.record("particles_received", self.received.len() as u64);
         let step = reading.step;
-        let received = self.received.drain(..);
-        shard.adopt(
-            &self.model,
-            step,
-            &reading.input,
-            &plan.parents,
-            &plan.task_of,
-            &plan.fresh,
-            &plan.holes,
-            received,
-        )?;
+        plan.adopt(&self.model, shard, step, &reading.input, self.received.drain(..))?;
         let update_work = shard.update(&self.model, &reading.input);
         let busy_us = plan.started.elapsed().as_micros() as u64;
         out.record("update_us", busy_us);

@@ -368,8 +368,12 @@ impl Resampler {
         self.empty.resize(tasks, false);
         let joining: Vec<u32> =
             (0..tasks).filter(|&t| self.empty[t] && self.task_of.contains(&t)).map(|t| t as u32).collect();
+        self.standing_in.resize(tasks, false);
         for &t in &joining {
+            // It holds its share from now on and reports for itself: the
+            // update waits for it.
             self.empty[t as usize] = false;
+            self.standing_in[t as usize] = false;
         }
         self.dead.iter_mut().for_each(|d| *d = false);
         self.deciding = Some((g.step, d.parents.clone(), holders));
