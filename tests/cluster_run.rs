@@ -92,28 +92,9 @@ fn a_slow_consumer_in_another_process_holds_its_producer_back_or_drops_by_policy
     let workers = Workers::start(1);
     let cluster = workers.cluster_file("sink = [\"w1\"]");
     let run = |policy: &str| {
-        let out = tempfile::tempdir().unwrap();
-        let done = squall(&[
-            "run",
-            "examples/topologies/probe.toml",
-            "--set",
-            "source.params.count=400",
-            "--set",
-            "relay.inputs.0.queue=4",
-            "--set",
-            "sink.params.delay_us=2000",
-            "--set",
-            "sink.inputs.0.queue=4",
-            "--set",
-            &format!("sink.inputs.0.policy=\"{policy}\""),
-            "--quiet",
-            "--out",
-            out.path().to_str().unwrap(),
-            "--cluster",
-            cluster.to_str().unwrap(),
-        ]);
-        assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
-        metrics(out.path())
+        let policy = format!("sink.inputs.0.policy=\"{policy}\"");
+        let sets = ["source.params.count=400", "relay.inputs.0.queue=4", "sink.params.delay_us=2000"];
+        probe_on(&workers, &cluster, &[&sets[..], &["sink.inputs.0.queue=4", &policy]].concat())
     };
     // block: every probe arrives, and the relay waited for room.
     let m = run("block");
@@ -195,6 +176,20 @@ fn speedup_on_a_cluster_adds_worker_rows_with_their_traffic() {
             _ => assert_eq!(wire_bytes, 0.0, "{csv}"),
         }
     }
+}
+
+/// `squall run` on the probe topology with `sets` on `cluster`, which
+/// must succeed; its metrics.
+fn probe_on(workers: &Workers, cluster: &Path, sets: &[&str]) -> serde_json::Value {
+    let out = tempfile::tempdir().unwrap();
+    let mut args = vec!["run", "examples/topologies/probe.toml", "--quiet"];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    args.extend(["--out", out.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()]);
+    let done = squall(&args);
+    assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
+    metrics(out.path())
 }
 
 /// `squall run` on the probe topology, 3000 probes at 1 kHz (3 s), on
@@ -334,30 +329,31 @@ fn local_or_shuffle_stays_in_the_producer_s_process() {
     let workers = Workers::start(2);
     let cluster = workers.cluster_file("relay = [\"w1\", \"w2\"]\nsink = [\"w1\", \"w2\"]");
     let crossed = |grouping: &str| {
-        let out = tempfile::tempdir().unwrap();
-        let done = squall(&[
-            "run",
-            "examples/topologies/probe.toml",
-            "--set",
-            "source.params.count=2000",
-            "--set",
-            "relay.parallelism=2",
-            "--set",
-            "sink.parallelism=2",
-            "--set",
-            &format!("sink.inputs.0.grouping=\"{grouping}\""),
-            "--quiet",
-            "--out",
-            out.path().to_str().unwrap(),
-            "--cluster",
-            cluster.to_str().unwrap(),
-        ]);
-        assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
-        let m = metrics(out.path());
+        let grouping = format!("sink.inputs.0.grouping=\"{grouping}\"");
+        let sets = ["source.params.count=2000", "relay.parallelism=2", "sink.parallelism=2", &grouping];
+        let m = probe_on(&workers, &cluster, &sets);
         assert_eq!(component(&m, "sink")["received"], 2000, "{m}");
         let edges = m["edges"].as_array().unwrap();
         edges.iter().filter(|e| e["from"] == "relay").map(|e| e["messages"].as_u64().unwrap()).sum::<u64>()
     };
     assert_eq!(crossed("local_or_shuffle"), 0, "each relay task has a sink task beside it");
     assert!(crossed("shuffle") > 0, "shuffle spreads over both processes");
+}
+
+#[test]
+fn losing_a_spout_s_worker_fails_the_run_naming_the_spout() {
+    let mut workers = Workers::start(2);
+    let cluster = workers.cluster_file("source = [\"w2\"]");
+    let out = tempfile::tempdir().unwrap();
+    let run = slow_probe_run(&cluster, out.path(), 1);
+    kill_once_hosting(&mut workers, 1);
+    let done = run.wait_with_output().unwrap();
+    let stderr = text(&done.stderr);
+    assert_eq!(done.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(
+            "spout \"source\" task 0 failed: its worker \"w2\" was lost, and its place in its source"
+        ),
+        "{stderr}"
+    );
 }

@@ -216,9 +216,10 @@ impl Resampler {
                 self.dead[slot] = true;
             }
         }
+        // Count each slot once, however many losses named it.
         let mut lost = 0;
         for (slot, &dead) in self.dead.iter().enumerate() {
-            if dead {
+            if dead && population.lineage_weight(slot) != Real::NEG_INFINITY {
                 population.lose(slot);
                 lost += 1;
             }

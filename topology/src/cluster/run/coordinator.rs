@@ -416,33 +416,42 @@ impl Hosts for &mut ClusterHosts<'_> {
     }
 
     fn abort(&mut self) {
-        for c in 0..self.topology.components.len() {
-            self.advance(c, Stage::Abort);
-        }
+        // An abort stops every task of every host, whichever component it
+        // names: one message does.
+        self.advance(0, Stage::Abort);
     }
 
-    fn recover(&mut self, host: u16, running: bool) -> Result<(), String> {
+    fn recover(&mut self, host: u16, running: bool) -> Result<(), (usize, usize, String)> {
         if self.lost.contains(&host) || !self.workers.contains(&host) {
             return Ok(());
         }
         let name = self.name(host).to_string();
-        if !running {
-            return Err(format!("failed: its worker \"{name}\" was lost while the run was ending"));
-        }
         let hosts = self.local.layout.hosts();
         let tasks: Vec<(usize, usize)> = hosts
             .iter()
             .enumerate()
             .flat_map(|(c, on)| on.iter().enumerate().filter(|(_, h)| **h == host).map(move |(t, _)| (c, t)))
             .collect();
-        if let Some(&(c, _)) =
-            tasks.iter().find(|(c, _)| self.topology.components[*c].spec.role == crate::spec::Role::Spout)
-        {
-            let spout = &self.topology.components[c].spec.name;
-            return Err(format!(
-                "failed: its worker \"{name}\" was lost, with spout \"{spout}\", whose place in its source is lost too"
+        let Some(&(first_c, first_t)) = tasks.first() else {
+            // It hosted nothing: nothing is lost.
+            self.workers.retain(|&h| h != host);
+            self.lost.push(host);
+            return Ok(());
+        };
+        if !running {
+            return Err((
+                first_c,
+                first_t,
+                format!("failed: its worker \"{name}\" was lost while the run was ending"),
             ));
         }
+        if let Some(&(c, t)) =
+            tasks.iter().find(|(c, _)| self.topology.components[*c].spec.role == crate::spec::Role::Spout)
+        {
+            let why = format!("failed: its worker \"{name}\" was lost, and its place in its source with it");
+            return Err((c, t, why));
+        }
+        let lost_at = |why: String| (first_c, first_t, why);
         self.workers.retain(|&h| h != host);
         self.lost.push(host);
         // Survivors take the tasks in turn; with none left, the coordinator.
@@ -450,10 +459,10 @@ impl Hosts for &mut ClusterHosts<'_> {
         let moves: Vec<(usize, usize, u16)> =
             tasks.iter().enumerate().map(|(i, &(c, t))| (c, t, survivors[i % survivors.len()])).collect();
         let wire = moves.iter().map(|&(c, t, h)| (c as u32, t as u32, h)).collect();
-        put(self.session, &self.control, Control::Reassign { lost: host, moves: wire })?;
-        self.local
-            .reassign(self.topology, self.options, &self.events, &moves)
-            .map_err(|e| format!("cannot start a task moved to the coordinator: {e}"))?;
+        put(self.session, &self.control, Control::Reassign { lost: host, moves: wire }).map_err(lost_at)?;
+        self.local.reassign(self.topology, self.options, &self.events, &moves).map_err(|e| {
+            lost_at(format!("failed: cannot start it again in the coordinator's process: {e}"))
+        })?;
         let placed: Vec<String> = moves
             .iter()
             .map(|&(c, t, h)| format!("{} {t} → {}", self.topology.components[c].spec.name, self.name(h)))

@@ -59,7 +59,8 @@ pub fn host_run(
     let topology = TopologySpec::parse(&plan.file, &plan.topology)
         .and_then(|spec| Topology::validate(spec, registry))
         .map_err(|e| refuse(format!("the topology does not validate here: {e}")))?;
-    let layout = Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(u16::MAX)).map_err(refuse)?);
+    let layout =
+        Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(plan.host_count)).map_err(refuse)?);
     let control = session
         .declare_subscriber(plan.control_key())
         .wait()

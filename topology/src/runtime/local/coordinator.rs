@@ -27,10 +27,11 @@ pub(crate) trait Hosts {
     fn abort(&mut self);
 
     /// A process of the run was lost: moves its tasks to the others, or
-    /// says why the run cannot go on. `running`: the spouts are not done.
-    fn recover(&mut self, host: u16, running: bool) -> Result<(), String> {
+    /// says why the run cannot go on, naming a task it lost (component,
+    /// task, why). `running`: the spouts are not done.
+    fn recover(&mut self, host: u16, running: bool) -> Result<(), (usize, usize, String)> {
         let _ = running;
-        Err(format!("host {host} was lost"))
+        Err((0, 0, format!("failed: host {host} was lost")))
     }
 }
 
@@ -128,9 +129,9 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
                         return Some((component, task, message));
                     }
                     EventKind::HostLost(host) => {
-                        if let Err(message) = self.hosts.recover(host, phase == Phase::Running) {
+                        if let Err(failure) = self.hosts.recover(host, phase == Phase::Running) {
                             self.abort(events, grace);
-                            return Some((component, task, message));
+                            return Some(failure);
                         }
                         self.last_scan = None;
                     }
