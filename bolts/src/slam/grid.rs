@@ -30,6 +30,11 @@ fn floor(v: Real) -> i64 {
     if (t as Real) > v { t - 1 } else { t }
 }
 
+/// Fraction bits of [`TiledGrid::fixed_of`]'s fixed-point positions: a
+/// position is off by at most 2⁻²⁴ cells (3 nm at 5 cm cells).
+pub const FIXED_BITS: u32 = 24;
+const FIXED_ONE: Real = (1u64 << FIXED_BITS) as Real;
+
 /// What one cell has seen.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Cell {
@@ -152,6 +157,18 @@ impl Tile {
             }
             hasher.digest128()
         })
+    }
+
+    /// A beam crossed cell (`x`, `y`). A cell no beam ended in stays free
+    /// whatever its visits, so its bits stand (most cells a beam crosses).
+    #[inline]
+    fn visit(&mut self, x: usize, y: usize, threshold: Real) {
+        let cell = &mut self.cells[y * TILE_SIDE + x];
+        if cell.hits == 0 && threshold > 0.0 {
+            cell.visits += 1;
+        } else {
+            self.update(x, y, threshold, |cell| cell.visits += 1);
+        }
     }
 
     /// Changes cell (`x`, `y`) of the tile with `f` and keeps its bits.
@@ -366,6 +383,35 @@ impl TiledGrid {
         (floor((x - self.origin.0) * self.per_metre), floor((y - self.origin.1) * self.per_metre))
     }
 
+    /// The position (`x`, `y`) in cells, as fixed-point numbers with
+    /// [`FIXED_BITS`] fraction bits, so that a scan matcher finds a beam's
+    /// cell by adding the beam's [`Self::fixed_length`]s and shifting
+    /// (`>> FIXED_BITS` is a floor) rather than flooring floats per beam.
+    /// `None` beyond 2³⁰ cells of the origin (tens of thousands of
+    /// kilometres), where such sums could overflow.
+    #[inline]
+    pub fn fixed_of(&self, x: Real, y: Real) -> Option<(i64, i64)> {
+        const LIMIT: Real = (1u64 << (30 + FIXED_BITS)) as Real;
+        let scale = self.per_metre * FIXED_ONE;
+        let (fx, fy) = ((x - self.origin.0) * scale, (y - self.origin.1) * scale);
+        (fx.abs() < LIMIT && fy.abs() < LIMIT).then_some((fx as i64, fy as i64))
+    }
+
+    /// A displacement of `metres` in [`Self::fixed_of`]'s units (saturating
+    /// far beyond any range a laser measures).
+    #[inline]
+    pub fn fixed_length(&self, metres: Real) -> i64 {
+        // Adding 1.5·2⁵² rounds a number below 2⁵⁰ to an integer held in
+        // the low bits of the sum, cheaper than a saturating conversion.
+        const SHIFTER: Real = 6_755_399_441_055_744.0;
+        let v = metres * self.per_metre * FIXED_ONE;
+        if v.abs() < (1u64 << 50) as Real {
+            (v + SHIFTER).to_bits() as i64 - SHIFTER.to_bits() as i64
+        } else {
+            v as i64
+        }
+    }
+
     fn slot(&self, tile: (i64, i64)) -> Option<usize> {
         let (i, j) = (tile.0 - self.tile_min.0, tile.1 - self.tile_min.1);
         (i >= 0 && j >= 0 && (i as usize) < self.tiles_wide && (j as usize) < self.tiles_high)
@@ -473,7 +519,7 @@ impl TiledGrid {
                     }
                     return;
                 }
-                tile.update(x, y, threshold, |cell| cell.visits += 1);
+                tile.visit(x, y, threshold);
                 c = line.step();
                 if (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT) != key {
                     break;
@@ -576,23 +622,24 @@ impl TiledGrid {
     /// tile are free).
     #[inline]
     fn row_bits(&self, x0: i64, y: i64, n: i64) -> (u32, u32) {
-        let (mut walls, mut free) = (0u64, 0u64);
+        debug_assert!((1..=32).contains(&n));
+        // The row spans at most two tiles: their bit rows side by side in
+        // one 64-bit word, shifted down to `x0`.
         let ty = (y & TILE_MASK) as usize;
-        let mut x = x0;
-        while x < x0 + n {
-            let lx = x & TILE_MASK;
-            let take = (TILE_SIDE as i64 - lx).min(x0 + n - x);
-            let (w, f) =
-                match self.slot((x >> TILE_SHIFT, y >> TILE_SHIFT)).and_then(|s| self.tiles[s].as_deref()) {
-                    Some(t) => (t.walls[ty], t.free[ty]),
-                    None => (0, u32::MAX),
-                };
-            let mask = (1u64 << take) - 1;
-            walls |= ((u64::from(w) >> lx) & mask) << (x - x0);
-            free |= ((u64::from(f) >> lx) & mask) << (x - x0);
-            x += take;
+        let tile_row = |tx: i64| match self.slot((tx, y >> TILE_SHIFT)).and_then(|s| self.tiles[s].as_deref())
+        {
+            Some(t) => (u64::from(t.walls[ty]), u64::from(t.free[ty])),
+            None => (0, u64::from(u32::MAX)),
+        };
+        let (tx, lx) = (x0 >> TILE_SHIFT, x0 & TILE_MASK);
+        let (mut walls, mut free) = tile_row(tx);
+        if lx + n > TILE_SIDE as i64 {
+            let (w, f) = tile_row(tx + 1);
+            walls |= w << TILE_SIDE;
+            free |= f << TILE_SIDE;
         }
-        (walls as u32, free as u32)
+        let mask = (1u64 << n) - 1;
+        (((walls >> lx) & mask) as u32, ((free >> lx) & mask) as u32)
     }
 
     /// Tiles cloned by copy-on-write since the last call.

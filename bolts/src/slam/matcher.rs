@@ -23,7 +23,7 @@
 
 use crate::geometry::{Pose2, Real};
 use crate::sensor::LaserReading;
-use crate::slam::grid::TiledGrid;
+use crate::slam::grid::{FIXED_BITS, TiledGrid};
 use crate::slam::options::{Cutoff, SlamOptions};
 
 /// GMapping's log-likelihood of a beam that matches nothing, before
@@ -61,6 +61,16 @@ impl PreparedScan {
         PreparedScan { beams, laser_offset: scan.laser_offset }
     }
 
+    /// Every `stride`-th beam of this scan: a coarse search scores many
+    /// poses far apart, where a quarter of the beams tells them apart as
+    /// well as all of them do.
+    pub fn every_nth(&self, stride: usize) -> PreparedScan {
+        PreparedScan {
+            beams: self.beams.iter().step_by(stride.max(1)).copied().collect(),
+            laser_offset: self.laser_offset,
+        }
+    }
+
     /// Beams that will be matched.
     pub fn len(&self) -> usize {
         self.beams.len()
@@ -73,13 +83,23 @@ impl PreparedScan {
 }
 
 /// A beam seen with the laser at one heading: its end point relative to
-/// the laser (world frame, metres) and the cell step from the end point
-/// back towards the laser.
+/// the laser (world frame), in metres and in the grid's fixed-point cells
+/// ([`TiledGrid::fixed_length`]), and the cell step from the end point back
+/// towards the laser.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Direction {
     dx: Real,
     dy: Real,
+    fixed: (i64, i64),
     back: (i64, i64),
+    /// `back` as a number 0..9 (the beam cache's key).
+    back_code: u32,
+}
+
+/// A step back (each component in −1..=1) as a number 0..9.
+#[inline]
+fn back_code(back: (i64, i64)) -> u32 {
+    (back.0 + 3 * back.1 + 4) as u32
 }
 
 /// `round(−c·√2)`: the step back along a beam whose direction has
@@ -94,12 +114,20 @@ fn step_back(c: Real) -> i64 {
 /// that only translate keep the heading, so the hill climber computes these
 /// once per heading rather than once per pose; each beam's direction is
 /// its laser-frame direction rotated, with no trigonometry per beam.
-fn directions(scan: &PreparedScan, theta: Real, out: &mut Vec<Direction>) {
+fn directions(grid: &TiledGrid, scan: &PreparedScan, theta: Real, out: &mut Vec<Direction>) {
     let (s, c) = theta.sin_cos();
     out.clear();
     out.extend(scan.beams.iter().map(|b| {
         let (cos, sin) = (c * b.cos - s * b.sin, s * b.cos + c * b.sin);
-        Direction { dx: b.range * cos, dy: b.range * sin, back: (step_back(cos), step_back(sin)) }
+        let (dx, dy) = (b.range * cos, b.range * sin);
+        let back = (step_back(cos), step_back(sin));
+        Direction {
+            dx,
+            dy,
+            fixed: (grid.fixed_length(dx), grid.fixed_length(dy)),
+            back,
+            back_code: back_code(back),
+        }
     }));
 }
 
@@ -129,10 +157,15 @@ const EXP2_SIXTEENTHS: [Real; 16] = [
 /// tenth of the run).
 #[inline(always)]
 fn exp_neg(x: Real) -> Real {
+    // Adding 1.5·2⁵² rounds a small non-negative number to an integer held
+    // in the low bits of the sum: no float-to-integer conversion (whose
+    // saturation checks cost more than the rest).
+    const SHIFTER: Real = 6_755_399_441_055_744.0;
     let clamped = x.min(700.0);
     // e^(−x) = 2^(−n/16) · e^(−r), n = round(16 x / ln 2), |r| ≤ ln 2 / 32.
-    let n = (clamped * (16.0 * std::f64::consts::LOG2_E) + 0.5) as i64;
-    let t = n as Real * (std::f64::consts::LN_2 / 16.0) - clamped;
+    let shifted = clamped * (16.0 * std::f64::consts::LOG2_E) + SHIFTER;
+    let n = shifted.to_bits() as i64 - SHIFTER.to_bits() as i64;
+    let t = (shifted - SHIFTER) * (std::f64::consts::LN_2 / 16.0) - clamped;
     let p = 1.0
         + t * (1.0 + t * (0.5 + t * (1.0 / 6.0 + t * (1.0 / 24.0 + t * (1.0 / 120.0 + t * (1.0 / 720.0))))));
     let v = p * EXP2_SIXTEENTHS[(n & 15) as usize] * Real::from_bits(((1023 - (n >> 4)) as u64) << 52);
@@ -219,17 +252,24 @@ impl BeamCache {
         }
     }
 
+    /// [`TiledGrid::nearest_backed_wall`] for an end point `hit` in cell `c`.
     #[inline(always)]
-    fn nearest(&mut self, grid: &TiledGrid, hit: (Real, Real), back: (i64, i64), k: i64) -> Option<Real> {
-        let c = grid.cell_of(hit.0, hit.1);
-        let (hx, hy) = (hit.0 as f32, hit.1 as f32);
+    fn nearest(
+        &mut self,
+        grid: &TiledGrid,
+        c: (i64, i64),
+        hit: (f32, f32),
+        back: (i64, i64),
+        back_code: u32,
+        k: i64,
+    ) -> Option<Real> {
+        let (hx, hy) = hit;
         let (Ok(x), Ok(y)) = (i32::try_from(c.0), i32::try_from(c.1)) else {
             // Cells beyond ±2³¹ (thousands of kilometres) are not cached.
             let mut best = f32::INFINITY;
             grid.backed_walls(c, back, k, |mx, my| best = best.min((hx - mx).powi(2) + (hy - my).powi(2)));
             return (best < f32::INFINITY).then_some(Real::from(best));
         };
-        let back_code = (back.0 + 3 * back.1 + 4) as u32;
         let hash = (x as u32).wrapping_mul(0x9e37_79b1) ^ (y as u32).wrapping_mul(0x85eb_ca77) ^ back_code;
         let index = (hash.wrapping_mul(0xc2b2_ae3d) >> (32 - CACHE_SLOTS.trailing_zeros())) as usize;
         let mut tag = (self.generation << 4) | back_code;
@@ -254,10 +294,7 @@ impl BeamCache {
             }
         }
         let slot = &self.slots[index];
-        let mut best = f32::INFINITY;
-        for i in 0..INLINE {
-            best = best.min((hx - slot.xs[i]).powi(2) + (hy - slot.ys[i]).powi(2));
-        }
+        let mut best = nearest_inline(slot, hx, hy);
         if slot.overflow_len > 0 {
             let start = slot.overflow_start as usize;
             for &(mx, my) in &self.overflow[start..start + slot.overflow_len as usize] {
@@ -266,6 +303,47 @@ impl BeamCache {
         }
         (best < f32::INFINITY).then_some(Real::from(best))
     }
+}
+
+/// The least squared distance from (`hx`, `hy`) to a slot's inline
+/// candidates: the four lanes of one SSE vector (the compiler does not
+/// vectorize the scalar form, and this is a fifth of a beam's cost). No
+/// operand is NaN, so the vector minimum is the scalar one.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
+#[inline(always)]
+fn nearest_inline(slot: &Slot, hx: f32, hy: f32) -> f32 {
+    // SAFETY: the build enables SSE (the `cfg` above; every x86-64
+    // processor has it), which is all `nearest_inline_sse` requires.
+    unsafe { nearest_inline_sse(slot, hx, hy) }
+}
+
+#[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
+#[target_feature(enable = "sse")]
+#[inline]
+fn nearest_inline_sse(slot: &Slot, hx: f32, hy: f32) -> f32 {
+    use std::arch::x86_64::{
+        _mm_add_ps, _mm_cvtss_f32, _mm_min_ps, _mm_mul_ps, _mm_set_ps, _mm_set1_ps, _mm_shuffle_ps,
+        _mm_sub_ps,
+    };
+    let (xs, ys) = (&slot.xs, &slot.ys);
+    let dx = _mm_sub_ps(_mm_set1_ps(hx), _mm_set_ps(xs[3], xs[2], xs[1], xs[0]));
+    let dy = _mm_sub_ps(_mm_set1_ps(hy), _mm_set_ps(ys[3], ys[2], ys[1], ys[0]));
+    let d = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy));
+    let d = _mm_min_ps(d, _mm_shuffle_ps::<0b01_00_11_10>(d, d));
+    _mm_cvtss_f32(_mm_min_ps(d, _mm_shuffle_ps::<0b10_11_00_01>(d, d)))
+}
+
+/// The least squared distance from (`hx`, `hy`) to a slot's inline
+/// candidates.
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
+#[inline(always)]
+fn nearest_inline(slot: &Slot, hx: f32, hy: f32) -> f32 {
+    let d: [f32; INLINE] = std::array::from_fn(|i| {
+        let (dx, dy) = (hx - slot.xs[i], hy - slot.ys[i]);
+        dx * dx + dy * dy
+    });
+    let lesser = |a: f32, b: f32| if a < b { a } else { b };
+    lesser(lesser(d[0], d[2]), lesser(d[1], d[3]))
 }
 
 /// For each beam, the squared distance from its end point to the best mean
@@ -282,8 +360,17 @@ fn match_beams(
     mut each: impl FnMut(Option<Real>),
 ) {
     let laser = pose.compose(&scan.laser_offset);
+    let Some(base) = grid.fixed_of(laser.x, laser.y) else {
+        // A pose beyond any map (garbage odometry): matched uncached.
+        for d in dirs {
+            each(grid.nearest_backed_wall((laser.x + d.dx, laser.y + d.dy), d.back, o.kernel));
+        }
+        return;
+    };
     for d in dirs {
-        each(cache.nearest(grid, (laser.x + d.dx, laser.y + d.dy), d.back, o.kernel));
+        let cell = ((base.0 + d.fixed.0) >> FIXED_BITS, (base.1 + d.fixed.1) >> FIXED_BITS);
+        let hit = ((laser.x + d.dx) as f32, (laser.y + d.dy) as f32);
+        each(cache.nearest(grid, cell, hit, d.back, d.back_code, o.kernel));
     }
 }
 
@@ -304,9 +391,12 @@ fn score_with(
 ) -> Real {
     let per_sigma = 1.0 / o.sigma;
     let mut exponents = std::mem::take(&mut cache.exponents);
-    exponents.clear();
+    exponents.resize(dirs.len(), 0.0);
+    let mut slots = exponents.iter_mut();
     match_beams(grid, pose, scan, dirs, o, cache, |d2| {
-        exponents.push(d2.map_or(Real::INFINITY, |d2| d2 * per_sigma));
+        if let Some(e) = slots.next() {
+            *e = d2.map_or(Real::INFINITY, |d2| d2 * per_sigma);
+        }
     });
     let s = exponents.iter().map(|&x| exp_neg(x)).sum();
     cache.exponents = exponents;
@@ -316,7 +406,7 @@ fn score_with(
 /// The matching score of `pose` (higher is better).
 pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
     let mut dirs = Vec::with_capacity(scan.beams.len());
-    directions(scan, laser_heading(pose, scan), &mut dirs);
+    directions(grid, scan, laser_heading(pose, scan), &mut dirs);
     score_with(grid, pose, scan, &dirs, o, &mut BeamCache::default())
 }
 
@@ -328,7 +418,7 @@ pub fn likelihood_and_score(
     o: &SlamOptions,
 ) -> (Real, Real, usize) {
     let mut dirs = Vec::with_capacity(scan.beams.len());
-    directions(scan, laser_heading(pose, scan), &mut dirs);
+    directions(grid, scan, laser_heading(pose, scan), &mut dirs);
     likelihood_with(grid, pose, scan, &dirs, o, &mut BeamCache::default())
 }
 
@@ -378,6 +468,10 @@ pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOpt
 
 /// Steps a side of the wide search's grid (7 × 7 × 7 poses).
 const WIDE_SEARCH_STEPS: i32 = 3;
+
+/// The wide search's grid scores every this many beams; the climb from its
+/// best pose scores them all.
+const WIDE_SEARCH_BEAM_STRIDE: usize = 4;
 
 /// The scan matcher's scratch memory (candidate cache, beam directions,
 /// poses scored), kept from particle to particle and reading to reading so
@@ -446,11 +540,17 @@ impl Matcher {
         steps: i32,
     ) -> Matched {
         self.cache.forget();
+        let coarse = scan.every_nth(WIDE_SEARCH_BEAM_STRIDE);
         let mut best = (Real::NEG_INFINITY, *init);
         let mut evaluations = 0;
         for a in -steps..=steps {
             let theta = init.theta + turn * Real::from(a) / Real::from(steps);
-            directions(scan, laser_heading(&Pose2::new(init.x, init.y, theta), scan), &mut self.turned_dirs);
+            directions(
+                grid,
+                &coarse,
+                laser_heading(&Pose2::new(init.x, init.y, theta), scan),
+                &mut self.turned_dirs,
+            );
             for i in -steps..=steps {
                 for j in -steps..=steps {
                     let pose = Pose2::new(
@@ -458,7 +558,7 @@ impl Matcher {
                         init.y + reach * Real::from(j) / Real::from(steps),
                         theta,
                     );
-                    let s = score_with(grid, &pose, scan, &self.turned_dirs, o, &mut self.cache);
+                    let s = score_with(grid, &pose, &coarse, &self.turned_dirs, o, &mut self.cache);
                     evaluations += 1;
                     if s > best.0 {
                         best = (s, pose);
@@ -493,7 +593,7 @@ impl Matcher {
         let Matcher { cache, current_dirs, turned_dirs, best_turned_dirs, seen } = self;
         seen.clear();
         let mut current: Lattice = (0, 0, 0);
-        directions(scan, laser_heading(init, scan), current_dirs);
+        directions(grid, scan, laser_heading(init, scan), current_dirs);
         let mut current_score = score_with(grid, init, scan, current_dirs, o, cache);
         seen.push(current);
         let mut evaluations = 1;
@@ -524,7 +624,7 @@ impl Matcher {
                 let s = if dt == 0 {
                     score_with(grid, &candidate, scan, current_dirs, o, cache)
                 } else {
-                    directions(scan, laser_heading(&candidate, scan), turned_dirs);
+                    directions(grid, scan, laser_heading(&candidate, scan), turned_dirs);
                     score_with(grid, &candidate, scan, turned_dirs, o, cache)
                 };
                 evaluations += 1;
@@ -629,9 +729,18 @@ mod tests {
                 let hit = (rng.random::<f64>() * 8.0, rng.random::<f64>() * 6.0);
                 let back = (rng.random_range(-1..=1), rng.random_range(-1..=1));
                 let want = grid.nearest_backed_wall(hit, back, k);
-                assert_eq!(cache.nearest(&grid, hit, back, k), want, "{hit:?} {back:?} k {k}");
+                let (cell, end) = (grid.cell_of(hit.0, hit.1), (hit.0 as f32, hit.1 as f32));
+                assert_eq!(
+                    cache.nearest(&grid, cell, end, back, back_code(back), k),
+                    want,
+                    "{hit:?} {back:?} k {k}"
+                );
                 // Asked again, from the cache.
-                assert_eq!(cache.nearest(&grid, hit, back, k), want, "{hit:?} {back:?} k {k}, cached");
+                assert_eq!(
+                    cache.nearest(&grid, cell, end, back, back_code(back), k),
+                    want,
+                    "{hit:?} {back:?} k {k}, cached"
+                );
                 matched += usize::from(want.is_some());
                 let mut found = 0;
                 grid.backed_walls(grid.cell_of(hit.0, hit.1), back, k, |_, _| found += 1);
