@@ -392,13 +392,16 @@ fn score_with(
     let per_sigma = 1.0 / o.sigma;
     let mut exponents = std::mem::take(&mut cache.exponents);
     exponents.resize(dirs.len(), 0.0);
-    let mut slots = exponents.iter_mut();
+    // Matched beams' exponents only, packed without a branch: a beam that
+    // matches nothing adds e^(−∞) = 0, which changes no sum.
+    let mut matched = 0;
     match_beams(grid, pose, scan, dirs, o, cache, |d2| {
-        if let Some(e) = slots.next() {
-            *e = d2.map_or(Real::INFINITY, |d2| d2 * per_sigma);
+        if let Some(e) = exponents.get_mut(matched) {
+            *e = d2.unwrap_or(0.0) * per_sigma;
         }
+        matched += usize::from(d2.is_some());
     });
-    let s = exponents.iter().map(|&x| exp_neg(x)).sum();
+    let s = exponents[..matched].iter().map(|&x| exp_neg(x)).sum();
     cache.exponents = exponents;
     s
 }
