@@ -77,13 +77,55 @@ impl Cell {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(into = "TileWire", try_from = "TileWire")]
 pub struct Tile {
-    cells: Box<[Cell; TILE_SIDE * TILE_SIDE]>,
+    cells: Box<Cells>,
     /// Bit x of `walls[y]`: cell (x, y) of the tile is a wall.
     walls: [u32; TILE_SIDE],
     /// Bit x of `free[y]`: cell (x, y) is free (see [`Cell::is_free`]).
     free: [u32; TILE_SIDE],
     /// The cells' digest once computed; every write clears it.
     digest: OnceLock<u128>,
+}
+
+/// Cells held as two arrays: the counts, which every beam crossing a cell
+/// reads and writes, and the mean hit points, which only hits and the scan
+/// matcher read. Integration streams through the counts alone, half the
+/// bytes of whole cells (it waits on memory, not on arithmetic).
+#[derive(Debug, Clone, PartialEq)]
+struct Cells {
+    counts: [Counts; TILE_SIDE * TILE_SIDE],
+    means: [[f32; 2]; TILE_SIDE * TILE_SIDE],
+}
+
+/// A cell's hits and visits (see [`Cell`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Counts {
+    hits: u32,
+    visits: u32,
+}
+
+impl Default for Cells {
+    fn default() -> Self {
+        Cells { counts: [Counts::default(); TILE_SIDE * TILE_SIDE], means: [[0.0; 2]; TILE_SIDE * TILE_SIDE] }
+    }
+}
+
+impl Cells {
+    /// Cell `i` (row-major) as one value.
+    #[inline]
+    fn get(&self, i: usize) -> Cell {
+        let (Counts { hits, visits }, [mean_x, mean_y]) = (self.counts[i], self.means[i]);
+        Cell { mean_x, mean_y, hits, visits }
+    }
+
+    #[inline]
+    fn set(&mut self, i: usize, c: Cell) {
+        self.counts[i] = Counts { hits: c.hits, visits: c.visits };
+        self.means[i] = [c.mean_x, c.mean_y];
+    }
+
+    fn iter(&self) -> impl Iterator<Item = Cell> + '_ {
+        (0..TILE_SIDE * TILE_SIDE).map(|i| self.get(i))
+    }
 }
 
 impl PartialEq for Tile {
@@ -95,7 +137,7 @@ impl PartialEq for Tile {
 impl Default for Tile {
     fn default() -> Self {
         Tile {
-            cells: Box::new([Cell::default(); TILE_SIDE * TILE_SIDE]),
+            cells: Box::default(),
             walls: [0; TILE_SIDE],
             free: [u32::MAX; TILE_SIDE],
             digest: OnceLock::new(),
@@ -114,7 +156,7 @@ struct TileWire {
 
 impl From<Tile> for TileWire {
     fn from(t: Tile) -> Self {
-        TileWire { cells: t.cells.to_vec(), walls: t.walls.to_vec(), free: t.free.to_vec() }
+        TileWire { cells: t.cells.iter().collect(), walls: t.walls.to_vec(), free: t.free.to_vec() }
     }
 }
 
@@ -123,11 +165,13 @@ impl TryFrom<TileWire> for Tile {
 
     fn try_from(w: TileWire) -> Result<Self, String> {
         let n = w.cells.len();
-        let cells: Box<[Cell; TILE_SIDE * TILE_SIDE]> = w
-            .cells
-            .into_boxed_slice()
-            .try_into()
-            .map_err(|_| format!("a tile holds {} cells, got {n}", TILE_SIDE * TILE_SIDE))?;
+        if n != TILE_SIDE * TILE_SIDE {
+            return Err(format!("a tile holds {} cells, got {n}", TILE_SIDE * TILE_SIDE));
+        }
+        let mut cells = Box::<Cells>::default();
+        for (i, &c) in w.cells.iter().enumerate() {
+            cells.set(i, c);
+        }
         let rows = |v: Vec<u32>| -> Result<[u32; TILE_SIDE], String> {
             let n = v.len();
             v.try_into().map_err(|_| format!("a tile has {TILE_SIDE} bit rows, got {n}"))
@@ -146,8 +190,9 @@ impl Tile {
             // call per row, not four per cell.
             let mut hasher = xxhash_rust::xxh3::Xxh3::new();
             let mut row = [0u8; 16 * TILE_SIDE];
-            for cells in self.cells.chunks_exact(TILE_SIDE) {
-                for (bytes, c) in row.chunks_exact_mut(16).zip(cells) {
+            for y in 0..TILE_SIDE {
+                for (x, bytes) in row.chunks_exact_mut(16).enumerate() {
+                    let c = self.cells.get(y * TILE_SIDE + x);
                     bytes[..4].copy_from_slice(&c.mean_x.to_le_bytes());
                     bytes[4..8].copy_from_slice(&c.mean_y.to_le_bytes());
                     bytes[8..12].copy_from_slice(&c.hits.to_le_bytes());
@@ -159,23 +204,25 @@ impl Tile {
         })
     }
 
-    /// A beam crossed cell (`x`, `y`). A cell no beam ended in stays free
+    /// A beam crossed cell `i` (row-major). A cell no beam ended in stays free
     /// whatever its visits, so its bits stand (most cells a beam crosses).
     #[inline]
-    fn visit(&mut self, x: usize, y: usize, threshold: Real) {
-        let cell = &mut self.cells[y * TILE_SIDE + x];
-        if cell.hits == 0 && threshold > 0.0 {
-            cell.visits += 1;
+    fn visit(&mut self, i: usize, threshold: Real) {
+        let counts = &mut self.cells.counts[i];
+        if counts.hits == 0 && threshold > 0.0 {
+            counts.visits += 1;
         } else {
-            self.update(x, y, threshold, |cell| cell.visits += 1);
+            self.update(i % TILE_SIDE, i / TILE_SIDE, threshold, |cell| cell.visits += 1);
         }
     }
 
     /// Changes cell (`x`, `y`) of the tile with `f` and keeps its bits.
     #[inline]
     fn update(&mut self, x: usize, y: usize, threshold: Real, f: impl FnOnce(&mut Cell)) {
-        let cell = &mut self.cells[y * TILE_SIDE + x];
-        f(cell);
+        let i = y * TILE_SIDE + x;
+        let mut cell = self.cells.get(i);
+        f(&mut cell);
+        self.cells.set(i, cell);
         let (wall, free) = (cell.is_wall(threshold), cell.is_free(threshold));
         self.walls[y] = (self.walls[y] & !(1 << x)) | (u32::from(wall) << x);
         self.free[y] = (self.free[y] & !(1 << x)) | (u32::from(free) << x);
@@ -183,7 +230,7 @@ impl Tile {
 }
 
 /// Bytes one tile occupies.
-pub const TILE_BYTES: usize = std::mem::size_of::<Cell>() * TILE_SIDE * TILE_SIDE + 8 * TILE_SIDE;
+pub const TILE_BYTES: usize = std::mem::size_of::<Cells>() + 8 * TILE_SIDE;
 
 /// Occupancy above which a cell is a wall, unless set otherwise.
 pub const DEFAULT_WALL_THRESHOLD: Real = 0.1;
@@ -423,7 +470,7 @@ impl TiledGrid {
     pub fn get(&self, c: (i64, i64)) -> Cell {
         let tile = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
         match self.slot(tile).and_then(|s| self.tiles[s].as_deref()) {
-            Some(t) => t.cells[((c.1 & TILE_MASK) as usize) * TILE_SIDE + (c.0 & TILE_MASK) as usize],
+            Some(t) => t.cells.get(((c.1 & TILE_MASK) as usize) * TILE_SIDE + (c.0 & TILE_MASK) as usize),
             None => Cell::default(),
         }
     }
@@ -519,7 +566,7 @@ impl TiledGrid {
                     }
                     return;
                 }
-                tile.visit(x, y, threshold);
+                tile.visit(y * TILE_SIDE + x, threshold);
                 c = line.step();
                 if (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT) != key {
                     break;
@@ -583,8 +630,8 @@ impl TiledGrid {
             while candidates != 0 {
                 let x = x0 as usize + candidates.trailing_zeros() as usize;
                 candidates &= candidates - 1;
-                let cell = &t.cells[y * TILE_SIDE + x];
-                visit(cell.mean_x, cell.mean_y);
+                let [mx, my] = t.cells.means[y * TILE_SIDE + x];
+                visit(mx, my);
             }
         }
     }
@@ -600,46 +647,46 @@ impl TiledGrid {
         k: i64,
         mut visit: impl FnMut(f32, f32),
     ) {
+        // The window and its back neighbours span cells c ± (k + 1): at
+        // most two tiles each way (2k + 3 < 32), looked up once.
+        let corner = (c.0 - k - 1, c.1 - k - 1);
+        let (tx, ty) = (corner.0 >> TILE_SHIFT, corner.1 >> TILE_SHIFT);
+        let tile_at = |i: i64, j: i64| self.slot((tx + i, ty + j)).and_then(|s| self.tiles[s].as_deref());
+        let tiles = [[tile_at(0, 0), tile_at(1, 0)], [tile_at(0, 1), tile_at(1, 1)]];
+        let tile_of =
+            |x: i64, y: i64| tiles[((y >> TILE_SHIFT) - ty) as usize][((x >> TILE_SHIFT) - tx) as usize];
         let n = 2 * k + 1;
+        let mask = (1u64 << n) - 1;
+        // The walls and free bits of the n cells from (x, y) along +x, bit
+        // i for cell x + i: the row's two tiles side by side in one word.
+        let row = |x: i64, y: i64| -> (u32, u32) {
+            let ly = (y & TILE_MASK) as usize;
+            let pair = &tiles[((y >> TILE_SHIFT) - ty) as usize];
+            let bits = |t: Option<&Tile>| {
+                t.map_or((0, u64::from(u32::MAX)), |t| (u64::from(t.walls[ly]), u64::from(t.free[ly])))
+            };
+            let ((w0, f0), (w1, f1)) = (bits(pair[0]), bits(pair[1]));
+            let shift = x - (tx << TILE_SHIFT);
+            let (walls, free) = (w0 | w1 << TILE_SIDE, f0 | f1 << TILE_SIDE);
+            (((walls >> shift) & mask) as u32, ((free >> shift) & mask) as u32)
+        };
         for y in c.1 - k..=c.1 + k {
-            let (walls, _) = self.row_bits(c.0 - k, y, n);
+            let (walls, _) = row(c.0 - k, y);
             if walls == 0 {
                 continue;
             }
-            let (_, free) = self.row_bits(c.0 - k + back.0, y + back.1, n);
+            let (_, free) = row(c.0 - k + back.0, y + back.1);
             let mut candidates = walls & free;
             while candidates != 0 {
                 let x = c.0 - k + i64::from(candidates.trailing_zeros());
                 candidates &= candidates - 1;
-                let cell = self.get((x, y));
-                visit(cell.mean_x, cell.mean_y);
+                if let Some(t) = tile_of(x, y) {
+                    let [mx, my] =
+                        t.cells.means[((y & TILE_MASK) as usize) * TILE_SIDE + (x & TILE_MASK) as usize];
+                    visit(mx, my);
+                }
             }
         }
-    }
-
-    /// The wall and free bits of the `n` ≤ 32 cells from (`x0`, `y`) along
-    /// +x, bit i for cell `x0 + i`, gathered across tiles (cells without a
-    /// tile are free).
-    #[inline]
-    fn row_bits(&self, x0: i64, y: i64, n: i64) -> (u32, u32) {
-        debug_assert!((1..=32).contains(&n));
-        // The row spans at most two tiles: their bit rows side by side in
-        // one 64-bit word, shifted down to `x0`.
-        let ty = (y & TILE_MASK) as usize;
-        let tile_row = |tx: i64| match self.slot((tx, y >> TILE_SHIFT)).and_then(|s| self.tiles[s].as_deref())
-        {
-            Some(t) => (u64::from(t.walls[ty]), u64::from(t.free[ty])),
-            None => (0, u64::from(u32::MAX)),
-        };
-        let (tx, lx) = (x0 >> TILE_SHIFT, x0 & TILE_MASK);
-        let (mut walls, mut free) = tile_row(tx);
-        if lx + n > TILE_SIDE as i64 {
-            let (w, f) = tile_row(tx + 1);
-            walls |= w << TILE_SIDE;
-            free |= f << TILE_SIDE;
-        }
-        let mask = (1u64 << n) - 1;
-        (((walls >> lx) & mask) as u32, ((free >> lx) & mask) as u32)
     }
 
     /// Tiles cloned by copy-on-write since the last call.
@@ -738,8 +785,9 @@ mod tests {
         assert!(refused(flipped).contains("bits disagree"));
         let mut poisoned = wire();
         let tile = poisoned.tiles.iter_mut().flatten().find(|t| t.cells.iter().any(|c| c.hits > 0)).unwrap();
-        let cell = Arc::make_mut(tile).cells.iter_mut().find(|c| c.hits > 0).unwrap();
-        cell.mean_x = f32::INFINITY;
+        let cells = &mut Arc::make_mut(tile).cells;
+        let i = cells.counts.iter().position(|c| c.hits > 0).unwrap();
+        cells.means[i][0] = f32::INFINITY;
         assert!(refused(poisoned).contains("not finite"));
         // Damaged bytes: an error or a valid grid, never a panic.
         let mut rng = ChaCha8Rng::seed_from_u64(3);

@@ -188,8 +188,6 @@ struct BeamCache {
     /// Candidates beyond a slot's first [`INLINE`] (a window with more
     /// walls than that is rare).
     overflow: Vec<(f32, f32)>,
-    /// Scratch for a window's candidates as the grid lists them.
-    found: Vec<(f32, f32)>,
     /// The per-beam exponents d²/σ of the pose being scored.
     exponents: Vec<Real>,
 }
@@ -235,7 +233,6 @@ impl Default for BeamCache {
             slots: vec![EMPTY_SLOT; CACHE_SLOTS],
             generation: 1,
             overflow: Vec::new(),
-            found: Vec::new(),
             exponents: Vec::new(),
         }
     }
@@ -278,19 +275,23 @@ impl BeamCache {
                 self.forget();
                 tag = (self.generation << 4) | back_code;
             }
-            self.found.clear();
-            let found = &mut self.found;
-            grid.backed_walls(c, back, k, |mx, my| found.push((mx, my)));
-            let slot = &mut self.slots[index];
+            let BeamCache { slots, overflow, .. } = self;
+            let slot = &mut slots[index];
             *slot = Slot { cell: (x, y), tag, ..EMPTY_SLOT };
-            for (i, &(mx, my)) in self.found.iter().take(INLINE).enumerate() {
-                slot.xs[i] = mx;
-                slot.ys[i] = my;
-            }
-            if self.found.len() > INLINE {
-                slot.overflow_start = self.overflow.len() as u32;
-                slot.overflow_len = (self.found.len() - INLINE) as u16;
-                self.overflow.extend_from_slice(&self.found[INLINE..]);
+            let start = overflow.len();
+            let mut found = 0;
+            grid.backed_walls(c, back, k, |mx, my| {
+                if found < INLINE {
+                    slot.xs[found] = mx;
+                    slot.ys[found] = my;
+                } else {
+                    overflow.push((mx, my));
+                }
+                found += 1;
+            });
+            if found > INLINE {
+                slot.overflow_start = start as u32;
+                slot.overflow_len = (found - INLINE) as u16;
             }
         }
         let slot = &self.slots[index];
