@@ -40,7 +40,7 @@ struct Beam {
 }
 
 /// A reading prepared for matching: usable beams only.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct PreparedScan {
     beams: Vec<Beam>,
     laser_offset: Pose2,
@@ -61,14 +61,14 @@ impl PreparedScan {
         PreparedScan { beams, laser_offset: scan.laser_offset }
     }
 
-    /// Every `stride`-th beam of this scan: a coarse search scores many
-    /// poses far apart, where a quarter of the beams tells them apart as
-    /// well as all of them do.
-    pub fn every_nth(&self, stride: usize) -> PreparedScan {
-        PreparedScan {
-            beams: self.beams.iter().step_by(stride.max(1)).copied().collect(),
-            laser_offset: self.laser_offset,
-        }
+    /// Every `stride`-th beam of this scan, into `out` (reused, so that
+    /// nothing is allocated once warm): a coarse search scores many poses
+    /// far apart, where a quarter of the beams tells them apart as well as
+    /// all of them do.
+    pub fn every_nth_into(&self, stride: usize, out: &mut PreparedScan) {
+        out.beams.clear();
+        out.beams.extend(self.beams.iter().step_by(stride.max(1)));
+        out.laser_offset = self.laser_offset;
     }
 
     /// Beams that will be matched.
@@ -487,6 +487,8 @@ pub struct Matcher {
     turned_dirs: Vec<Direction>,
     best_turned_dirs: Vec<Direction>,
     seen: Vec<Lattice>,
+    /// The wide search's subsample of the scan.
+    coarse_scan: PreparedScan,
 }
 
 impl Matcher {
@@ -508,7 +510,10 @@ impl Matcher {
             return m;
         }
         let (reach, turn) = (o.wide_search_reach, o.wide_search_turn);
-        let wide = self.wide_search(grid, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
+        let (_, start, grid_evaluations) =
+            self.wide_grid(grid, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
+        let mut wide = self.climb(grid, &start, scan, o);
+        wide.evaluations += grid_evaluations;
         let evaluations = m.evaluations + wide.evaluations;
         if wide.score > m.score * o.wide_search_margin {
             Matched { evaluations, ..wide }
@@ -543,15 +548,36 @@ impl Matcher {
         turn: Real,
         steps: i32,
     ) -> Matched {
+        let (_, start, evaluations) = self.wide_grid(grid, init, scan, o, reach, turn, steps);
+        // The climb reads the same map: the candidates cached so far stay.
+        let mut m = self.climb(grid, &start, scan, o);
+        m.evaluations += evaluations;
+        m
+    }
+
+    /// The wide search's grid: its best pose, that pose's score over every
+    /// [`WIDE_SEARCH_BEAM_STRIDE`]-th beam, and the poses scored.
+    #[allow(clippy::too_many_arguments)]
+    fn wide_grid(
+        &mut self,
+        grid: &TiledGrid,
+        init: &Pose2,
+        scan: &PreparedScan,
+        o: &SlamOptions,
+        reach: Real,
+        turn: Real,
+        steps: i32,
+    ) -> (Real, Pose2, u32) {
         self.cache.forget();
-        let coarse = scan.every_nth(WIDE_SEARCH_BEAM_STRIDE);
+        scan.every_nth_into(WIDE_SEARCH_BEAM_STRIDE, &mut self.coarse_scan);
+        let coarse = &self.coarse_scan;
         let mut best = (Real::NEG_INFINITY, *init);
         let mut evaluations = 0;
         for a in -steps..=steps {
             let theta = init.theta + turn * Real::from(a) / Real::from(steps);
             directions(
                 grid,
-                &coarse,
+                coarse,
                 laser_heading(&Pose2::new(init.x, init.y, theta), scan),
                 &mut self.turned_dirs,
             );
@@ -562,7 +588,7 @@ impl Matcher {
                         init.y + reach * Real::from(j) / Real::from(steps),
                         theta,
                     );
-                    let s = score_with(grid, &pose, &coarse, &self.turned_dirs, o, &mut self.cache);
+                    let s = score_with(grid, &pose, coarse, &self.turned_dirs, o, &mut self.cache);
                     evaluations += 1;
                     if s > best.0 {
                         best = (s, pose);
@@ -570,10 +596,7 @@ impl Matcher {
                 }
             }
         }
-        // The climb reads the same map: the candidates cached so far stay.
-        let mut m = self.climb(grid, &best.1, scan, o);
-        m.evaluations += evaluations;
-        m
+        (best.0, best.1, evaluations)
     }
 
     /// The hill climb on `grid` with whatever the cache holds for it.
@@ -594,7 +617,7 @@ impl Matcher {
                 init.theta + p.2 as Real * unit.1,
             )
         };
-        let Matcher { cache, current_dirs, turned_dirs, best_turned_dirs, seen } = self;
+        let Matcher { cache, current_dirs, turned_dirs, best_turned_dirs, seen, .. } = self;
         seen.clear();
         let mut current: Lattice = (0, 0, 0);
         directions(grid, scan, laser_heading(init, scan), current_dirs);
