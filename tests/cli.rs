@@ -230,6 +230,15 @@ fn eval_scores_raw_odometry_of_the_real_logs_as_published() {
         for key in ["trans_std", "rot_mean_deg", "rot_std_deg"] {
             assert!(v[key].as_f64().unwrap() > 0.0, "{log}: {key}");
         }
+        // The breakdown by span covers every relation; odometry's error
+        // grows with the span, so the long relations carry most of it.
+        let spans = v["by_span"].as_array().unwrap();
+        let counted: u64 = spans.iter().map(|s| s["matched"].as_u64().unwrap()).sum();
+        let shares: f64 = spans.iter().map(|s| s["share"].as_f64().unwrap()).sum();
+        assert_eq!(Some(counted), v["matched"].as_u64(), "{log}");
+        assert!((shares - 1.0).abs() < 1e-9, "{log}: shares add up to {shares}");
+        let means: Vec<f64> = spans.iter().map(|s| s["trans_mean"].as_f64().unwrap()).collect();
+        assert!(means[0] < means[2], "{log}: {means:?}");
     }
 }
 

@@ -45,6 +45,18 @@ pub(super) fn eval(args: &EvalArgs) -> ExitCode {
                     println!("relations: {} of {} matched", r.matched, r.total);
                     println!("  translational error: {:.4} ± {:.4} m", r.trans_mean, r.trans_std);
                     println!("  rotational error:    {:.3} ± {:.3} deg", r.rot_mean_deg, r.rot_std_deg);
+                    for span in r.by_span.iter().filter(|s| s.matched > 0) {
+                        let spans = match span.to_secs {
+                            Some(to) => format!("{}–{to} s", span.from_secs),
+                            None => format!("{} s or more", span.from_secs),
+                        };
+                        println!(
+                            "  spanning {spans}: {} relations, {:.4} m ({:.0}% of the summed error)",
+                            span.matched,
+                            span.trans_mean,
+                            100.0 * span.share
+                        );
+                    }
                 }
                 if let Some(g) = gt {
                     println!("ground truth: {} poses matched", g.pairs);

@@ -56,6 +56,28 @@ pub struct RelationScore {
     pub rot_mean_deg: f64,
     /// Its standard deviation, degrees.
     pub rot_std_deg: f64,
+    /// The translational error by the time between a relation's two
+    /// scans ([`SPANS`]): short relations measure local accuracy, long
+    /// ones whether loops closed.
+    pub by_span: [SpanScore; 3],
+}
+
+/// The span classes of [`RelationScore::by_span`], seconds: [from, to).
+pub const SPANS: [(f64, f64); 3] = [(0.0, 10.0), (10.0, 100.0), (100.0, f64::INFINITY)];
+
+/// The relations of one span class.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct SpanScore {
+    /// Shortest span in the class, seconds.
+    pub from_secs: f64,
+    /// Span the class ends below, seconds (`None`: no end).
+    pub to_secs: Option<f64>,
+    /// Matched relations in the class.
+    pub matched: usize,
+    /// Their mean translational error, metres (0 without relations).
+    pub trans_mean: f64,
+    /// Their share of the summed translational error of all classes.
+    pub share: f64,
 }
 
 /// The error of one relation: (translation m, rotation rad).
@@ -69,6 +91,7 @@ pub fn relation_error(p1: &Pose2, p2: &Pose2, truth: &Pose2) -> (f64, f64) {
 /// stamps are not counted (see `matched`).
 pub fn score(trajectory: &Trajectory, relations: &[Relation]) -> RelationScore {
     let (mut trans, mut rot) = (Vec::new(), Vec::new());
+    let mut sums = [(0usize, 0.0); SPANS.len()];
     for r in relations {
         let (Some(p1), Some(p2)) =
             (trajectory.at(r.t1, STAMP_TOLERANCE), trajectory.at(r.t2, STAMP_TOLERANCE))
@@ -78,9 +101,25 @@ pub fn score(trajectory: &Trajectory, relations: &[Relation]) -> RelationScore {
         let (t, a) = relation_error(&p1, &p2, &r.motion);
         trans.push(t);
         rot.push(a.to_degrees());
+        let span = (r.t2 - r.t1).abs();
+        if let Some(class) = SPANS.iter().position(|&(from, to)| span >= from && span < to) {
+            sums[class].0 += 1;
+            sums[class].1 += t;
+        }
     }
     let (trans_mean, trans_std) = mean_std(&trans);
     let (rot_mean_deg, rot_std_deg) = mean_std(&rot);
+    let total: f64 = sums.iter().map(|s| s.1).sum();
+    let by_span = std::array::from_fn(|i| {
+        let ((from_secs, to), (matched, sum)) = (SPANS[i], sums[i]);
+        SpanScore {
+            from_secs,
+            to_secs: to.is_finite().then_some(to),
+            matched,
+            trans_mean: if matched > 0 { sum / matched as f64 } else { 0.0 },
+            share: if total > 0.0 { sum / total } else { 0.0 },
+        }
+    });
     RelationScore {
         matched: trans.len(),
         total: relations.len(),
@@ -88,6 +127,7 @@ pub fn score(trajectory: &Trajectory, relations: &[Relation]) -> RelationScore {
         trans_std,
         rot_mean_deg,
         rot_std_deg,
+        by_span,
     }
 }
 
@@ -155,6 +195,23 @@ mod tests {
             .collect();
         assert!(straight.iter().all(|e| (e - 0.3).abs() < 1e-9), "{straight:?}");
         assert!(s.trans_mean > 0.25 && s.rot_mean_deg < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn errors_are_broken_down_by_span() {
+        let t = square_walk();
+        // Exact 3-step relations (3 s) and one 30 s relation that is 1 m off.
+        let mut relations = exact_relations(&t);
+        let (p0, p30) = (t.poses[0], t.poses[30]);
+        let off = p30.relative_to(&p0).compose(&Pose2::new(1.0, 0.0, 0.0));
+        relations.push(Relation { t1: 0.0, t2: 30.0, motion: off });
+        let s = score(&t, &relations);
+        let [short, middle, long] = s.by_span;
+        assert_eq!((short.matched, middle.matched, long.matched), (37, 1, 0));
+        assert!(short.trans_mean < 1e-12 && short.share < 1e-9, "{short:?}");
+        assert!((middle.trans_mean - 1.0).abs() < 1e-9 && (middle.share - 1.0).abs() < 1e-9, "{middle:?}");
+        assert_eq!((middle.from_secs, middle.to_secs, long.to_secs), (10.0, Some(100.0), None));
+        assert_eq!((long.trans_mean, long.share), (0.0, 0.0));
     }
 
     #[test]

@@ -818,6 +818,36 @@ mod tests {
     }
 
     #[test]
+    fn fixed_point_cells_agree_with_cell_of() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let g = TiledGrid::new(0.05, (-3.2, 7.9));
+        let to_cell = |f: (i64, i64)| (f.0 >> FIXED_BITS, f.1 >> FIXED_BITS);
+        let mut checked = 0;
+        for _ in 0..100_000 {
+            let laser = (rng.random_range(-500.0..500.0), rng.random_range(-500.0..500.0));
+            let beam = (rng.random_range(-80.0..80.0), rng.random_range(-80.0..80.0));
+            let end = (laser.0 + beam.0, laser.1 + beam.1);
+            let want = g.cell_of(end.0, end.1);
+            // Within a few 2⁻²⁴ cells of a cell's edge either side may win.
+            let inside = |v: f64| {
+                let frac = v / 0.05 - (v / 0.05).floor();
+                frac > 1e-6 && frac < 1.0 - 1e-6
+            };
+            if !(inside(end.0 + 3.2) && inside(end.1 - 7.9)) {
+                continue;
+            }
+            let base = g.fixed_of(laser.0, laser.1).unwrap();
+            let cell = to_cell((base.0 + g.fixed_length(beam.0), base.1 + g.fixed_length(beam.1)));
+            assert_eq!(cell, want, "laser {laser:?} beam {beam:?}");
+            checked += 1;
+        }
+        assert!(checked > 99_000, "{checked}");
+        assert_eq!(g.fixed_of(1e9, 0.0), None, "beyond 2^30 cells");
+        assert_eq!(g.fixed_length(0.05), 1 << FIXED_BITS);
+        assert_eq!(g.fixed_length(-0.05), -(1 << FIXED_BITS));
+    }
+
+    #[test]
     fn cells_anywhere_grow_the_grid() {
         let mut g = TiledGrid::new(0.05, (0.0, 0.0));
         for c in [(0, 0), (-1, -1), (100, -300), (-5000, 7000)] {
