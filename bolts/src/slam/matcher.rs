@@ -510,10 +510,7 @@ impl Matcher {
             return m;
         }
         let (reach, turn) = (o.wide_search_reach, o.wide_search_turn);
-        let (_, start, grid_evaluations) =
-            self.wide_grid(grid, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
-        let mut wide = self.climb(grid, &start, scan, o);
-        wide.evaluations += grid_evaluations;
+        let wide = self.wide_search(grid, predicted, scan, o, reach, turn, WIDE_SEARCH_STEPS);
         let evaluations = m.evaluations + wide.evaluations;
         if wide.score > m.score * o.wide_search_margin {
             Matched { evaluations, ..wide }
@@ -535,8 +532,10 @@ impl Matcher {
     }
 
     /// A coarse search of a wide window around `init` (±`reach` metres,
-    /// ±`turn` radians, in `steps` steps a side), then a climb from its best
-    /// pose: for readings the climb from `init` could not match well.
+    /// ±`turn` radians, in `steps` steps a side) on every
+    /// [`WIDE_SEARCH_BEAM_STRIDE`]-th beam, then a climb on all beams from
+    /// its best pose: for readings the climb from `init` could not match
+    /// well.
     #[allow(clippy::too_many_arguments)]
     pub fn wide_search(
         &mut self,
@@ -548,26 +547,6 @@ impl Matcher {
         turn: Real,
         steps: i32,
     ) -> Matched {
-        let (_, start, evaluations) = self.wide_grid(grid, init, scan, o, reach, turn, steps);
-        // The climb reads the same map: the candidates cached so far stay.
-        let mut m = self.climb(grid, &start, scan, o);
-        m.evaluations += evaluations;
-        m
-    }
-
-    /// The wide search's grid: its best pose, that pose's score over every
-    /// [`WIDE_SEARCH_BEAM_STRIDE`]-th beam, and the poses scored.
-    #[allow(clippy::too_many_arguments)]
-    fn wide_grid(
-        &mut self,
-        grid: &TiledGrid,
-        init: &Pose2,
-        scan: &PreparedScan,
-        o: &SlamOptions,
-        reach: Real,
-        turn: Real,
-        steps: i32,
-    ) -> (Real, Pose2, u32) {
         self.cache.forget();
         scan.every_nth_into(WIDE_SEARCH_BEAM_STRIDE, &mut self.coarse_scan);
         let coarse = &self.coarse_scan;
@@ -596,7 +575,10 @@ impl Matcher {
                 }
             }
         }
-        (best.0, best.1, evaluations)
+        // The climb reads the same map: the candidates cached so far stay.
+        let mut m = self.climb(grid, &best.1, scan, o);
+        m.evaluations += evaluations;
+        m
     }
 
     /// The hill climb on `grid` with whatever the cache holds for it.
