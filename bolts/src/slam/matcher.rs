@@ -201,14 +201,15 @@ const INLINE: usize = 4;
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C, align(16))]
 struct Slot {
+    /// First, so that each is one aligned vector load.
+    xs: [f32; INLINE],
+    ys: [f32; INLINE],
     cell: (i32, i32),
     /// The generation in the high bits, the step back in the low four.
     tag: u32,
+    overflow_start: u32,
     /// Candidates beyond the inline ones.
     overflow_len: u16,
-    overflow_start: u32,
-    xs: [f32; INLINE],
-    ys: [f32; INLINE],
 }
 
 const EMPTY_SLOT: Slot = Slot {
@@ -323,12 +324,15 @@ fn nearest_inline(slot: &Slot, hx: f32, hy: f32) -> f32 {
 #[inline]
 fn nearest_inline_sse(slot: &Slot, hx: f32, hy: f32) -> f32 {
     use std::arch::x86_64::{
-        _mm_add_ps, _mm_cvtss_f32, _mm_min_ps, _mm_mul_ps, _mm_set_ps, _mm_set1_ps, _mm_shuffle_ps,
+        _mm_add_ps, _mm_cvtss_f32, _mm_load_ps, _mm_min_ps, _mm_mul_ps, _mm_set1_ps, _mm_shuffle_ps,
         _mm_sub_ps,
     };
-    let (xs, ys) = (&slot.xs, &slot.ys);
-    let dx = _mm_sub_ps(_mm_set1_ps(hx), _mm_set_ps(xs[3], xs[2], xs[1], xs[0]));
-    let dy = _mm_sub_ps(_mm_set1_ps(hy), _mm_set_ps(ys[3], ys[2], ys[1], ys[0]));
+    // SAFETY: each is a [f32; 4] at the start of a 16-byte-aligned slot (or
+    // 16 bytes after it): 16 readable, aligned bytes. (Built from lanes,
+    // the compiler loads them piece by piece.)
+    let (xs, ys) = unsafe { (_mm_load_ps(slot.xs.as_ptr()), _mm_load_ps(slot.ys.as_ptr())) };
+    let dx = _mm_sub_ps(_mm_set1_ps(hx), xs);
+    let dy = _mm_sub_ps(_mm_set1_ps(hy), ys);
     let d = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy));
     let d = _mm_min_ps(d, _mm_shuffle_ps::<0b01_00_11_10>(d, d));
     _mm_cvtss_f32(_mm_min_ps(d, _mm_shuffle_ps::<0b10_11_00_01>(d, d)))
@@ -483,9 +487,10 @@ const WIDE_SEARCH_BEAM_STRIDE: usize = 4;
 #[derive(Debug, Default)]
 pub struct Matcher {
     cache: BeamCache,
-    current_dirs: Vec<Direction>,
+    /// The climb's beam directions by heading.
+    headings: Headings,
+    /// The wide search's beam directions at its heading.
     turned_dirs: Vec<Direction>,
-    best_turned_dirs: Vec<Direction>,
     seen: Vec<Lattice>,
     /// The wide search's subsample of the scan.
     coarse_scan: PreparedScan,
@@ -599,11 +604,13 @@ impl Matcher {
                 init.theta + p.2 as Real * unit.1,
             )
         };
-        let Matcher { cache, current_dirs, turned_dirs, best_turned_dirs, seen, .. } = self;
+        let Matcher { cache, headings, seen, .. } = self;
         seen.clear();
+        headings.forget();
         let mut current: Lattice = (0, 0, 0);
-        directions(grid, scan, laser_heading(init, scan), current_dirs);
-        let mut current_score = score_with(grid, init, scan, current_dirs, o, cache);
+        let mut current_heading =
+            headings.slot(0, [usize::MAX; 2], |v| directions(grid, scan, laser_heading(init, scan), v));
+        let mut current_score = score_with(grid, init, scan, headings.at(current_heading), o, cache);
         seen.push(current);
         let mut evaluations = 1;
         let mut step = 1i64 << o.iterations;
@@ -616,7 +623,7 @@ impl Matcher {
             }
             best_score = current_score;
             let mut best_local = current;
-            let mut best_is_turn = false;
+            let mut best_heading = current_heading;
             let moves =
                 [(step, 0, 0), (-step, 0, 0), (0, -step, 0), (0, step, 0), (0, 0, step), (0, 0, -step)];
             for (dx, dy, dt) in moves {
@@ -630,26 +637,23 @@ impl Matcher {
                     continue;
                 }
                 let candidate = pose_at(at);
-                let s = if dt == 0 {
-                    score_with(grid, &candidate, scan, current_dirs, o, cache)
+                let heading = if dt == 0 {
+                    current_heading
                 } else {
-                    directions(grid, scan, laser_heading(&candidate, scan), turned_dirs);
-                    score_with(grid, &candidate, scan, turned_dirs, o, cache)
+                    headings.slot(at.2, [current_heading, best_heading], |v| {
+                        directions(grid, scan, laser_heading(&candidate, scan), v)
+                    })
                 };
+                let s = score_with(grid, &candidate, scan, headings.at(heading), o, cache);
                 evaluations += 1;
                 seen.push(at);
                 if s > current_score {
                     current_score = s;
                     best_local = at;
-                    best_is_turn = dt != 0;
-                    if best_is_turn {
-                        std::mem::swap(best_turned_dirs, turned_dirs);
-                    }
+                    best_heading = heading;
                 }
             }
-            if best_is_turn {
-                std::mem::swap(current_dirs, best_turned_dirs);
-            }
+            current_heading = best_heading;
             current = best_local;
             let improving = current_score > best_score;
             if evaluations >= limit || !(improving || refinement < o.iterations) {
@@ -657,8 +661,55 @@ impl Matcher {
             }
         }
         let pose = pose_at(current);
-        let (_, log_likelihood, matched_beams) = likelihood_with(grid, &pose, scan, current_dirs, o, cache);
+        let (_, log_likelihood, matched_beams) =
+            likelihood_with(grid, &pose, scan, headings.at(current_heading), o, cache);
         Matched { pose, score: current_score, evaluations, log_likelihood, matched_beams }
+    }
+}
+
+/// Beam directions at the few headings a climb keeps coming back to, by
+/// lattice heading: a turn's candidates are the current heading ± the step,
+/// the same two again after every move that only translates, so most are
+/// computed once per climb rather than once per turn.
+#[derive(Debug, Default)]
+struct Headings {
+    entries: [(Option<i64>, Vec<Direction>); HEADINGS],
+    /// The entry to reuse next.
+    next: usize,
+}
+
+/// Headings a climb keeps: the current one, the best turn so far and two
+/// more.
+const HEADINGS: usize = 4;
+
+impl Headings {
+    /// Forgets every heading (another climb: another start, scan or grid).
+    fn forget(&mut self) {
+        for entry in &mut self.entries {
+            entry.0 = None;
+        }
+    }
+
+    /// The entry holding the directions at lattice heading `index`, filled
+    /// by `fill` if none does, in an entry other than the two in `keep`.
+    fn slot(&mut self, index: i64, keep: [usize; 2], fill: impl FnOnce(&mut Vec<Direction>)) -> usize {
+        if let Some(found) = self.entries.iter().position(|e| e.0 == Some(index)) {
+            return found;
+        }
+        let mut victim = self.next % HEADINGS;
+        while keep.contains(&victim) {
+            victim = (victim + 1) % HEADINGS;
+        }
+        self.next = victim + 1;
+        let entry = &mut self.entries[victim];
+        entry.0 = Some(index);
+        fill(&mut entry.1);
+        victim
+    }
+
+    /// The directions in entry `slot`.
+    fn at(&self, slot: usize) -> &[Direction] {
+        &self.entries[slot].1
     }
 }
 
