@@ -207,11 +207,16 @@ fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> std::process::Ch
         .unwrap()
 }
 
-/// Kills worker i 0.7 s after it started hosting a run.
-fn kill_once_hosting(workers: &mut Workers, i: usize) {
+/// Returns 0.7 s after worker i started hosting a run.
+fn well_into_hosting(workers: &mut Workers, i: usize) {
     let log = workers.wait_for_log(i, "hosting run");
     assert!(log.contains("hosting run"), "worker {i} never hosted the run: {log}");
     std::thread::sleep(std::time::Duration::from_millis(700));
+}
+
+/// Kills worker i 0.7 s after it started hosting a run.
+fn kill_once_hosting(workers: &mut Workers, i: usize) {
+    well_into_hosting(workers, i);
     workers.children[i].kill().unwrap();
 }
 
@@ -242,8 +247,7 @@ fn a_killed_coordinator_leaves_no_worker_running() {
     let cluster = workers.cluster_file("relay = [\"w1\"]");
     let out = tempfile::tempdir().unwrap();
     let mut run = slow_probe_run(&cluster, out.path(), 1);
-    workers.wait_for_log(0, "hosting run");
-    std::thread::sleep(std::time::Duration::from_millis(700));
+    well_into_hosting(&mut workers, 0);
     run.kill().unwrap();
     let _ = run.wait();
     let killed = std::time::Instant::now();

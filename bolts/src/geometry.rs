@@ -5,6 +5,17 @@ use serde::{Deserialize, Serialize};
 /// The scalar type of the geometry code.
 pub type Real = f64;
 
+/// `v` rounded to the nearest integer (ties to even), as a float and as an
+/// integer, for |`v`| < 2⁵¹. Adding 1.5·2⁵² leaves the rounded value in the
+/// low bits of the sum: in hot loops this replaces a float-to-integer
+/// conversion, whose saturation checks cost more than the rest.
+#[inline(always)]
+pub fn round_small(v: Real) -> (Real, i64) {
+    const SHIFTER: Real = 6_755_399_441_055_744.0;
+    let shifted = v + SHIFTER;
+    (shifted - SHIFTER, shifted.to_bits() as i64 - SHIFTER.to_bits() as i64)
+}
+
 /// Wraps an angle into (-π, π].
 pub fn normalize_angle(a: Real) -> Real {
     let two_pi = 2.0 * std::f64::consts::PI;

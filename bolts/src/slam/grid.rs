@@ -12,7 +12,7 @@
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, OnceLock};
 
-use crate::geometry::Real;
+use crate::geometry::{Real, round_small};
 
 /// Cells per tile side is `1 << TILE_SHIFT`.
 pub const TILE_SHIFT: u32 = 5;
@@ -448,15 +448,8 @@ impl TiledGrid {
     /// far beyond any range a laser measures).
     #[inline]
     pub fn fixed_length(&self, metres: Real) -> i64 {
-        // Adding 1.5·2⁵² rounds a number below 2⁵⁰ to an integer held in
-        // the low bits of the sum, cheaper than a saturating conversion.
-        const SHIFTER: Real = 6_755_399_441_055_744.0;
         let v = metres * self.per_metre * FIXED_ONE;
-        if v.abs() < (1u64 << 50) as Real {
-            (v + SHIFTER).to_bits() as i64 - SHIFTER.to_bits() as i64
-        } else {
-            v as i64
-        }
+        if v.abs() < (1u64 << 50) as Real { round_small(v).1 } else { v as i64 }
     }
 
     fn slot(&self, tile: (i64, i64)) -> Option<usize> {

@@ -21,7 +21,7 @@
 //! One addition, [`Matcher::refine`]: when the climb matches too few beams
 //! (odometry far off), a wide coarse search looks further.
 
-use crate::geometry::{Pose2, Real};
+use crate::geometry::{Pose2, Real, round_small};
 use crate::sensor::LaserReading;
 use crate::slam::grid::{FIXED_BITS, TiledGrid};
 use crate::slam::options::{Cutoff, SlamOptions};
@@ -157,15 +157,10 @@ const EXP2_SIXTEENTHS: [Real; 16] = [
 /// tenth of the run).
 #[inline(always)]
 fn exp_neg(x: Real) -> Real {
-    // Adding 1.5·2⁵² rounds a small non-negative number to an integer held
-    // in the low bits of the sum: no float-to-integer conversion (whose
-    // saturation checks cost more than the rest).
-    const SHIFTER: Real = 6_755_399_441_055_744.0;
     let clamped = x.min(700.0);
     // e^(−x) = 2^(−n/16) · e^(−r), n = round(16 x / ln 2), |r| ≤ ln 2 / 32.
-    let shifted = clamped * (16.0 * std::f64::consts::LOG2_E) + SHIFTER;
-    let n = shifted.to_bits() as i64 - SHIFTER.to_bits() as i64;
-    let t = (shifted - SHIFTER) * (std::f64::consts::LN_2 / 16.0) - clamped;
+    let (rounded, n) = round_small(clamped * (16.0 * std::f64::consts::LOG2_E));
+    let t = rounded * (std::f64::consts::LN_2 / 16.0) - clamped;
     let p = 1.0
         + t * (1.0 + t * (0.5 + t * (1.0 / 6.0 + t * (1.0 / 24.0 + t * (1.0 / 120.0 + t * (1.0 / 720.0))))));
     let v = p * EXP2_SIXTEENTHS[(n & 15) as usize] * Real::from_bits(((1023 - (n >> 4)) as u64) << 52);
@@ -211,6 +206,13 @@ struct Slot {
     /// Candidates beyond the inline ones.
     overflow_len: u16,
 }
+
+// `nearest_inline_sse` loads `xs` and `ys` as aligned vectors.
+const _: () = assert!(
+    std::mem::offset_of!(Slot, xs) % 16 == 0
+        && std::mem::offset_of!(Slot, ys) % 16 == 0
+        && std::mem::align_of::<Slot>() >= 16
+);
 
 const EMPTY_SLOT: Slot = Slot {
     cell: (0, 0),
