@@ -220,14 +220,22 @@ fn kill_once_hosting(workers: &mut Workers, i: usize) {
     workers.children[i].kill().unwrap();
 }
 
-#[test]
-fn a_lost_worker_s_tasks_move_to_a_survivor_and_the_run_completes() {
+/// A slow probe run with `relays` relay tasks on two workers placed by
+/// `placement`, worker w2 killed once it hosts the run: the workers (w1
+/// still running), the run's output and its output folder.
+fn probe_run_losing_w2(placement: &str, relays: usize) -> (Workers, std::process::Output, tempfile::TempDir) {
     let mut workers = Workers::start(2);
-    let cluster = workers.cluster_file("relay = [\"w1\", \"w2\"]");
+    let cluster = workers.cluster_file(placement);
     let out = tempfile::tempdir().unwrap();
-    let run = slow_probe_run(&cluster, out.path(), 2);
+    let run = slow_probe_run(&cluster, out.path(), relays);
     kill_once_hosting(&mut workers, 1);
     let done = run.wait_with_output().unwrap();
+    (workers, done, out)
+}
+
+#[test]
+fn a_lost_worker_s_tasks_move_to_a_survivor_and_the_run_completes() {
+    let (workers, done, out) = probe_run_losing_w2("relay = [\"w1\", \"w2\"]", 2);
     assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
     let m = metrics(out.path());
     let warnings: Vec<&str> = m["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
@@ -346,12 +354,7 @@ fn local_or_shuffle_stays_in_the_producer_s_process() {
 
 #[test]
 fn losing_a_spout_s_worker_fails_the_run_naming_the_spout() {
-    let mut workers = Workers::start(2);
-    let cluster = workers.cluster_file("source = [\"w2\"]");
-    let out = tempfile::tempdir().unwrap();
-    let run = slow_probe_run(&cluster, out.path(), 1);
-    kill_once_hosting(&mut workers, 1);
-    let done = run.wait_with_output().unwrap();
+    let (_workers, done, _out) = probe_run_losing_w2("source = [\"w2\"]", 1);
     let stderr = text(&done.stderr);
     assert_eq!(done.status.code(), Some(1), "{stderr}");
     assert!(
