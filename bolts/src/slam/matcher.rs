@@ -364,30 +364,74 @@ fn match_beams(
     dirs: &[Direction],
     o: &SlamOptions,
     cache: &mut BeamCache,
-    mut each: impl FnMut(Option<Real>),
+    each: impl FnMut(Option<Real>),
 ) {
-    let laser = pose.compose(&scan.laser_offset);
-    let Some(base) = grid.fixed_of(laser.x, laser.y) else {
-        // A pose beyond any map (garbage odometry): matched uncached.
+    LaserAt::new(grid, pose, scan).match_beams(grid, dirs, o, cache, each);
+}
+
+/// Where the laser is for one pose being scored: in metres and in the
+/// grid's fixed-point cells (`None` for a pose beyond any map).
+#[derive(Debug, Clone, Copy)]
+struct LaserAt {
+    x: Real,
+    y: Real,
+    fixed: Option<(i64, i64)>,
+}
+
+impl LaserAt {
+    #[inline]
+    fn new(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan) -> Self {
+        let laser = pose.compose(&scan.laser_offset);
+        LaserAt { x: laser.x, y: laser.y, fixed: grid.fixed_of(laser.x, laser.y) }
+    }
+
+    /// [`match_beams`] for the beams of `dirs` (any run of a scan's
+    /// directions at this laser's heading).
+    #[inline]
+    fn match_beams(
+        &self,
+        grid: &TiledGrid,
+        dirs: &[Direction],
+        o: &SlamOptions,
+        cache: &mut BeamCache,
+        mut each: impl FnMut(Option<Real>),
+    ) {
+        let Some(base) = self.fixed else {
+            // A pose beyond any map (garbage odometry): matched uncached.
+            for d in dirs {
+                each(grid.nearest_backed_wall((self.x + d.dx, self.y + d.dy), d.back, o.kernel));
+            }
+            return;
+        };
         for d in dirs {
-            each(grid.nearest_backed_wall((laser.x + d.dx, laser.y + d.dy), d.back, o.kernel));
+            let cell = ((base.0 + d.fixed.0) >> FIXED_BITS, (base.1 + d.fixed.1) >> FIXED_BITS);
+            let hit = ((self.x + d.dx) as f32, (self.y + d.dy) as f32);
+            each(cache.nearest(grid, cell, hit, d.back, d.back_code, o.kernel));
         }
-        return;
-    };
-    for d in dirs {
-        let cell = ((base.0 + d.fixed.0) >> FIXED_BITS, (base.1 + d.fixed.1) >> FIXED_BITS);
-        let hit = ((laser.x + d.dx) as f32, (laser.y + d.dy) as f32);
-        each(cache.nearest(grid, cell, hit, d.back, d.back_code, o.kernel));
     }
 }
+
+/// Beams scored between checks of whether a pose can still beat the one
+/// to beat (see [`score_with`]).
+const BOUND_CHECK_BEAMS: usize = 16;
+
+/// Slack for float rounding in the bound of [`score_with`]: far above the
+/// rounding of a sum of a few thousand terms of at most 1, far below any
+/// difference between scores that matters.
+const BOUND_SLACK: Real = 1e-6;
 
 fn laser_heading(pose: &Pose2, scan: &PreparedScan) -> Real {
     pose.compose(&scan.laser_offset).theta
 }
 
-/// The score: the sum over matched beams of e^(−d²/σ). The exponents are
-/// gathered first and exponentiated in a second loop whose iterations are
-/// independent.
+/// The score: the sum over matched beams of e^(−d²/σ), or `None` once it is
+/// certain not to exceed `to_beat`. Each beam adds at most 1, so a pose
+/// whose partial sum plus the beams left cannot reach `to_beat` is given up
+/// early: most of a climb's candidates lose, many of them clearly. The sum
+/// is the same, term by term and in order, as without the bound. Within a
+/// run of beams, the exponents are gathered first and exponentiated in a
+/// second loop whose iterations are independent.
+#[allow(clippy::too_many_arguments)]
 fn score_with(
     grid: &TiledGrid,
     pose: &Pose2,
@@ -395,29 +439,43 @@ fn score_with(
     dirs: &[Direction],
     o: &SlamOptions,
     cache: &mut BeamCache,
-) -> Real {
+    to_beat: Real,
+) -> Option<Real> {
     let per_sigma = 1.0 / o.sigma;
+    let laser = LaserAt::new(grid, pose, scan);
     let mut exponents = std::mem::take(&mut cache.exponents);
-    exponents.resize(dirs.len(), 0.0);
-    // Matched beams' exponents only, packed without a branch: a beam that
-    // matches nothing adds e^(−∞) = 0, which changes no sum.
-    let mut matched = 0;
-    match_beams(grid, pose, scan, dirs, o, cache, |d2| {
-        if let Some(e) = exponents.get_mut(matched) {
-            *e = d2.unwrap_or(0.0) * per_sigma;
+    exponents.resize(BOUND_CHECK_BEAMS, 0.0);
+    let mut s: Real = 0.0;
+    let mut left = dirs.len();
+    for run in dirs.chunks(BOUND_CHECK_BEAMS) {
+        // Matched beams' exponents only, packed without a branch: a beam
+        // that matches nothing adds e^(−∞) = 0, which changes no sum.
+        let mut matched = 0;
+        laser.match_beams(grid, run, o, cache, |d2| {
+            if let Some(e) = exponents.get_mut(matched) {
+                *e = d2.unwrap_or(0.0) * per_sigma;
+            }
+            matched += usize::from(d2.is_some());
+        });
+        for &x in &exponents[..matched] {
+            s += exp_neg(x);
         }
-        matched += usize::from(d2.is_some());
-    });
-    let s = exponents[..matched].iter().map(|&x| exp_neg(x)).sum();
+        left -= run.len();
+        if s + left as Real + BOUND_SLACK < to_beat {
+            cache.exponents = exponents;
+            return None;
+        }
+    }
     cache.exponents = exponents;
-    s
+    Some(s)
 }
 
 /// The matching score of `pose` (higher is better).
 pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
     let mut dirs = Vec::with_capacity(scan.beams.len());
     directions(grid, scan, laser_heading(pose, scan), &mut dirs);
-    score_with(grid, pose, scan, &dirs, o, &mut BeamCache::default())
+    score_with(grid, pose, scan, &dirs, o, &mut BeamCache::default(), Real::NEG_INFINITY)
+        .expect("nothing is beaten by −∞")
 }
 
 /// (score, log-likelihood, beams matched) of `pose`.
@@ -574,9 +632,9 @@ impl Matcher {
                         init.y + reach * Real::from(j) / Real::from(steps),
                         theta,
                     );
-                    let s = score_with(grid, &pose, coarse, &self.turned_dirs, o, &mut self.cache);
+                    let s = score_with(grid, &pose, coarse, &self.turned_dirs, o, &mut self.cache, best.0);
                     evaluations += 1;
-                    if s > best.0 {
+                    if let Some(s) = s.filter(|&s| s > best.0) {
                         best = (s, pose);
                     }
                 }
@@ -612,7 +670,9 @@ impl Matcher {
         let mut current: Lattice = (0, 0, 0);
         let mut current_heading =
             headings.slot(0, [usize::MAX; 2], |v| directions(grid, scan, laser_heading(init, scan), v));
-        let mut current_score = score_with(grid, init, scan, headings.at(current_heading), o, cache);
+        let mut current_score =
+            score_with(grid, init, scan, headings.at(current_heading), o, cache, Real::NEG_INFINITY)
+                .expect("nothing is beaten by −∞");
         seen.push(current);
         let mut evaluations = 1;
         let mut step = 1i64 << o.iterations;
@@ -646,10 +706,10 @@ impl Matcher {
                         directions(grid, scan, laser_heading(&candidate, scan), v)
                     })
                 };
-                let s = score_with(grid, &candidate, scan, headings.at(heading), o, cache);
+                let s = score_with(grid, &candidate, scan, headings.at(heading), o, cache, current_score);
                 evaluations += 1;
                 seen.push(at);
-                if s > current_score {
+                if let Some(s) = s.filter(|&s| s > current_score) {
                     current_score = s;
                     best_local = at;
                     best_heading = heading;
@@ -772,6 +832,32 @@ mod tests {
             integrate_scan(&mut g, p, &scan_of(world, p), 20.0);
         }
         g
+    }
+
+    #[test]
+    fn a_bounded_score_gives_up_only_on_poses_that_cannot_win() {
+        let (grid, truth, o, scan) = scene();
+        let mut cache = BeamCache::default();
+        let (mut dirs, mut given_up) = (Vec::new(), 0);
+        for (i, dx) in [-0.3, -0.05, 0.0, 0.02, 0.2].into_iter().enumerate() {
+            let pose = Pose2::new(truth.x + dx, truth.y - dx, truth.theta + 0.5 * dx);
+            directions(&grid, &scan, laser_heading(&pose, &scan), &mut dirs);
+            let full = score_with(&grid, &pose, &scan, &dirs, &o, &mut cache, Real::NEG_INFINITY).unwrap();
+            assert!(full > 10.0, "pose {i} matches beams ({full})");
+            for to_beat in [full - 1.0, full - 1e-9, full, full + 1e-9, full + 0.5, full + 5.0, 1e6] {
+                match score_with(&grid, &pose, &scan, &dirs, &o, &mut cache, to_beat) {
+                    // The same sum, bit for bit.
+                    Some(s) => assert_eq!(s.to_bits(), full.to_bits(), "pose {i}, to beat {to_beat}"),
+                    None => {
+                        assert!(full <= to_beat, "pose {i} scores {full} > {to_beat} but was given up");
+                        given_up += 1;
+                    }
+                }
+            }
+            // Nothing can beat a score above one per beam: given up early.
+            assert_eq!(score_with(&grid, &pose, &scan, &dirs, &o, &mut cache, 1e6), None);
+        }
+        assert!(given_up >= 10, "poses that cannot win are given up ({given_up})");
     }
 
     #[test]
