@@ -96,11 +96,32 @@ struct Cells {
     means: [[f32; 2]; TILE_SIDE * TILE_SIDE],
 }
 
-/// A cell's hits and visits (see [`Cell`]).
+/// A cell's hits and visits (see [`Cell`]), in 16 bits each: integration
+/// reads and writes these for every cell a beam crosses, and at half the
+/// bytes it waits on memory less.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct Counts {
-    hits: u32,
-    visits: u32,
+    hits: u16,
+    visits: u16,
+}
+
+/// The most visits a cell counts. A visit beyond halves the cell's hits and
+/// visits: the occupancy the wall test reads stays (to within one hit), and
+/// later beams weigh a little more. A cell reaches this only after tens of
+/// thousands of beams crossed it (none does in the logs of this repository).
+pub const MAX_VISITS: u32 = u16::MAX as u32;
+
+impl Cell {
+    /// Halves hits and visits while visits exceed [`MAX_VISITS`], and
+    /// keeps hits at most visits.
+    #[inline]
+    fn keep_countable(&mut self) {
+        while self.visits > MAX_VISITS {
+            self.visits /= 2;
+            self.hits /= 2;
+        }
+        self.hits = self.hits.min(self.visits);
+    }
 }
 
 impl Default for Cells {
@@ -114,12 +135,15 @@ impl Cells {
     #[inline]
     fn get(&self, i: usize) -> Cell {
         let (Counts { hits, visits }, [mean_x, mean_y]) = (self.counts[i], self.means[i]);
-        Cell { mean_x, mean_y, hits, visits }
+        Cell { mean_x, mean_y, hits: hits.into(), visits: visits.into() }
     }
 
+    /// Stores cell `i`, whose counts must be countable (at most
+    /// [`MAX_VISITS`] visits, no more hits than visits).
     #[inline]
     fn set(&mut self, i: usize, c: Cell) {
-        self.counts[i] = Counts { hits: c.hits, visits: c.visits };
+        debug_assert!(c.visits <= MAX_VISITS && c.hits <= c.visits, "{c:?}");
+        self.counts[i] = Counts { hits: c.hits as u16, visits: c.visits as u16 };
         self.means[i] = [c.mean_x, c.mean_y];
     }
 
@@ -170,6 +194,13 @@ impl TryFrom<TileWire> for Tile {
         }
         let mut cells = Box::<Cells>::default();
         for (i, &c) in w.cells.iter().enumerate() {
+            if c.visits > MAX_VISITS || c.hits > c.visits {
+                let (x, y) = (i % TILE_SIDE, i / TILE_SIDE);
+                return Err(format!(
+                    "tile cell ({x}, {y}): {} hits in {} visits (a cell counts at most {MAX_VISITS} visits and no more hits than visits)",
+                    c.hits, c.visits
+                ));
+            }
             cells.set(i, c);
         }
         let rows = |v: Vec<u32>| -> Result<[u32; TILE_SIDE], String> {
@@ -210,7 +241,8 @@ impl Tile {
     fn visit(&mut self, i: usize, threshold: Real) {
         let counts = &mut self.cells.counts[i];
         if counts.hits == 0 && threshold > 0.0 {
-            counts.visits += 1;
+            // Past the count, halved as `Cell::keep_countable` halves.
+            counts.visits = counts.visits.checked_add(1).unwrap_or(u16::MAX / 2 + 1);
         } else {
             self.update(i % TILE_SIDE, i / TILE_SIDE, threshold, |cell| cell.visits += 1);
         }
@@ -222,6 +254,7 @@ impl Tile {
         let i = y * TILE_SIDE + x;
         let mut cell = self.cells.get(i);
         f(&mut cell);
+        cell.keep_countable();
         self.cells.set(i, cell);
         let (wall, free) = (cell.is_wall(threshold), cell.is_free(threshold));
         self.walls[y] = (self.walls[y] & !(1 << x)) | (u32::from(wall) << x);
@@ -523,7 +556,8 @@ impl TiledGrid {
     }
 
     /// Changes cell `c` with `f`: its tile is created, or cloned if another
-    /// map shares it; the wall and free bits follow the new value.
+    /// map shares it; the wall and free bits follow the new value. Counts
+    /// past [`MAX_VISITS`] are halved, and hits kept at most visits.
     #[inline]
     pub fn update(&mut self, c: (i64, i64), f: impl FnOnce(&mut Cell)) {
         let tile = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
@@ -844,7 +878,10 @@ mod tests {
     fn cells_anywhere_grow_the_grid() {
         let mut g = TiledGrid::new(0.05, (0.0, 0.0));
         for c in [(0, 0), (-1, -1), (100, -300), (-5000, 7000)] {
-            g.update(c, |cell| cell.hits += 3);
+            g.update(c, |cell| {
+                cell.hits += 3;
+                cell.visits += 3;
+            });
         }
         for c in [(0, 0), (-1, -1), (100, -300), (-5000, 7000)] {
             assert_eq!(g.get(c).hits, 3, "{c:?}");
@@ -989,6 +1026,44 @@ mod tests {
         b.add_beam((0, 1), (25, 1), Some((2.55, 0.15)));
         assert_eq!(b.take_clone_count(), 1, "26 cells, one tile, one clone");
         assert_eq!(a.get((5, 1)).visits, 0, "the original is untouched");
+    }
+
+    #[test]
+    fn counts_past_the_limit_are_halved() {
+        let mut g = TiledGrid::new(0.1, (0.0, 0.0));
+        let n = MAX_VISITS + 1;
+        for _ in 0..n {
+            g.add_beam((0, 0), (2, 0), Some((0.25, 0.05)));
+        }
+        // A crossed cell (no hits) and the end cell (all hits) each saw one
+        // visit more than a cell counts: halved.
+        let crossed = g.get((1, 0));
+        assert_eq!((crossed.hits, crossed.visits), (0, n / 2));
+        let end = g.get((2, 0));
+        assert_eq!((end.hits, end.visits), (n / 2, n / 2));
+        assert!(end.is_wall(g.wall_threshold()) && crossed.is_free(g.wall_threshold()));
+        // And they go on counting from there.
+        g.add_beam((0, 0), (2, 0), Some((0.25, 0.05)));
+        assert_eq!(g.get((1, 0)).visits, n / 2 + 1);
+        assert_eq!((g.get((2, 0)).hits, g.get((2, 0)).visits), (n / 2 + 1, n / 2 + 1));
+        // A write of any value keeps the counts countable.
+        g.update((5, 5), |c| *c = Cell { hits: 9, visits: 3 * MAX_VISITS, ..Cell::default() });
+        let c = g.get((5, 5));
+        assert!(c.visits <= MAX_VISITS && c.hits <= c.visits, "{c:?}");
+    }
+
+    #[test]
+    fn a_tile_from_the_wire_with_uncountable_cells_is_refused() {
+        let wire = |c: Cell| TileWire {
+            cells: vec![c; TILE_SIDE * TILE_SIDE],
+            walls: vec![0; TILE_SIDE],
+            free: vec![u32::MAX; TILE_SIDE],
+        };
+        let e = Tile::try_from(wire(Cell { visits: MAX_VISITS + 1, ..Cell::default() })).unwrap_err();
+        assert!(e.contains("65536 visits") && e.contains("(0, 0)"), "{e}");
+        let e = Tile::try_from(wire(Cell { hits: 2, visits: 1, ..Cell::default() })).unwrap_err();
+        assert!(e.contains("2 hits in 1 visits"), "{e}");
+        assert!(Tile::try_from(wire(Cell { visits: MAX_VISITS, ..Cell::default() })).is_ok());
     }
 
     #[test]
