@@ -100,9 +100,11 @@ pub struct SlamOptions {
     /// unbounded.
     pub cutoff: Cutoff,
     /// When the climb matches fewer than this fraction of the beams, a
-    /// wide search looks further (squall's addition for poor odometry; 0
-    /// turns it off, as in GMapping). The default is 0.7. Off under a
-    /// cutoff, which bounds every evaluation.
+    /// wide search looks further (squall's addition for poor odometry and
+    /// for re-entering a mapped area a little off; 0 turns it off, as in
+    /// GMapping). The default is 0.75: on re-entering after a long loop the
+    /// climb's matched fraction dips to about 0.7–0.8. Off under a cutoff,
+    /// which bounds every evaluation.
     pub wide_search_below: Real,
     /// Half-width of the wide search in x and y, metres. The default is 0.3.
     pub wide_search_reach: Real,
@@ -145,7 +147,7 @@ impl Default for SlamOptions {
             resample_threshold: 0.5,
             occupied_threshold: 0.1,
             cutoff: Cutoff::Unbounded,
-            wide_search_below: 0.7,
+            wide_search_below: 0.75,
             wide_search_reach: 0.3,
             wide_search_turn: 0.15,
             wide_search_margin: 1.2,
