@@ -236,13 +236,13 @@ impl Tile {
     }
 
     /// A beam crossed cell `i` (row-major). A cell no beam ended in stays free
-    /// whatever its visits, so its bits stand (most cells a beam crosses).
+    /// whatever its visits, so its bits stand (most cells a beam crosses);
+    /// a full count goes the general way, which halves it.
     #[inline]
     fn visit(&mut self, i: usize, threshold: Real) {
         let counts = &mut self.cells.counts[i];
-        if counts.hits == 0 && threshold > 0.0 {
-            // Past the count, halved as `Cell::keep_countable` halves.
-            counts.visits = counts.visits.checked_add(1).unwrap_or(u16::MAX / 2 + 1);
+        if counts.hits == 0 && threshold > 0.0 && counts.visits < u16::MAX {
+            counts.visits += 1;
         } else {
             self.update(i % TILE_SIDE, i / TILE_SIDE, threshold, |cell| cell.visits += 1);
         }
