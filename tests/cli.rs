@@ -431,6 +431,24 @@ fn slam_on_an_aces_prefix_writes_maps_and_a_good_trajectory() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let matcher = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "matcher").unwrap();
     assert!(matcher["custom"]["evaluations_per_particle"]["count"].as_u64().unwrap() > 0, "{matcher}");
+    // Map memory and tiles cloned are reported per reading: one value per
+    // update; the maps grow (a resampling may shrink them: copies share
+    // tiles), the final size is among the sizes seen, and the clones add up
+    // to the total.
+    let updates = matcher["custom"]["update_us"]["count"].as_u64().unwrap();
+    let memory = &matcher["custom"]["map_bytes_per_reading"];
+    assert_eq!(memory["count"].as_u64().unwrap(), updates, "{matcher}");
+    let final_bytes = matcher["custom"]["map_bytes"].as_f64().unwrap();
+    let largest = memory["max"].as_f64().unwrap();
+    assert!(largest > 0.99 * final_bytes, "{matcher}");
+    assert!(memory["p50"].as_f64().unwrap() < largest, "the maps grow: {matcher}");
+    let resampler = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "resampler").unwrap();
+    let clones = &resampler["custom"]["tiles_cloned_per_reading"];
+    assert_eq!(clones["count"].as_u64().unwrap(), updates, "{resampler}");
+    let total = resampler["custom"]["tiles_cloned"].as_f64().unwrap();
+    assert!(total > 0.0, "{resampler}");
+    let summed = clones["mean"].as_f64().unwrap() * updates as f64;
+    assert!((summed - total).abs() < 0.01 * total, "{resampler}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

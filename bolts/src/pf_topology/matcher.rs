@@ -13,8 +13,9 @@
 //! reading its peers send.
 //!
 //! Metrics: `evaluations_per_particle`, `correct_us`, `update_us`,
-//! `particles_received`, and at the end `map_bytes` (the task's particles'
-//! memory, shared tiles counted once).
+//! `particles_received`, `map_bytes_per_reading` (the task's particles'
+//! memory after each update, shared tiles counted once), and at the end
+//! `map_bytes` (the same, for the final set).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -332,6 +333,8 @@ impl<M: HostedModel> Matcher<M> {
         let update_work = shard.update(&self.model, &reading.input);
         let busy_us = plan.started.elapsed().as_micros() as u64;
         out.record("update_us", busy_us);
+        // Outside the timed work: how the maps grow, reading by reading.
+        out.record("map_bytes_per_reading", self.model.memory(shard.held().iter().map(|(_, s)| s)));
         self.best = plan.best;
         let (task, tasks) = (self.task as u32, self.tasks as u32);
         out.emit("report", Report::Updated { step, task, tasks, busy_us, update_work }).await?;

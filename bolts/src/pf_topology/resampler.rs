@@ -8,8 +8,10 @@
 //! Metrics per correction: `neff_x100`, `resamplings`, `particles_moved`,
 //! `bytes_moved`, `resample_us` (resampling and assignment),
 //! `imbalance_us` (slowest matcher task's correction minus the mean: seed
-//! 003's t_max − t_mean), `tiles_cloned`, and `bytes_moved_round_robin`:
-//! what placing new slot j on task j mod K would have moved.
+//! 003's t_max − t_mean), `tiles_cloned` (in all) and
+//! `tiles_cloned_per_reading` (every task's, per update), and
+//! `bytes_moved_round_robin`: what placing new slot j on task j mod K
+//! would have moved.
 //!
 //! A matcher task lost with its process (cluster mode) is replaced by one
 //! that holds nothing and says so (`Report::Lost`). Its particles are then
@@ -245,6 +247,7 @@ impl Resampler {
         if let Some((step, _, _)) = self.deciding.take() {
             self.done = Some(step);
             out.count("tiles_cloned", self.gathered.update_work);
+            out.record("tiles_cloned_per_reading", self.gathered.update_work);
             self.gathered = Gathered::default();
             out.emit("ready", Ready { step, corrected: true }).await?;
         } else if self.gathered.corrected {
