@@ -333,11 +333,14 @@ impl<M: HostedModel> Matcher<M> {
         let update_work = shard.update(&self.model, &reading.input);
         let busy_us = plan.started.elapsed().as_micros() as u64;
         out.record("update_us", busy_us);
-        // Outside the timed work: how the maps grow, reading by reading.
-        out.record("map_bytes_per_reading", self.model.memory(shard.held().iter().map(|(_, s)| s)));
         self.best = plan.best;
         let (task, tasks) = (self.task as u32, self.tasks as u32);
         out.emit("report", Report::Updated { step, task, tasks, busy_us, update_work }).await?;
+        // Once the report is out (the resampler need not wait for it): how
+        // the maps grow, reading by reading.
+        if let Some(shard) = &self.shard {
+            out.record("map_bytes_per_reading", self.model.memory(shard.held().iter().map(|(_, s)| s)));
+        }
         self.corrected(out).await
     }
 
