@@ -490,8 +490,8 @@ fn slam_on_the_simulator_and_its_argument_checks() {
 }
 
 /// `squall slam` with K matcher tasks writes byte-identical `trajectory.tum`
-/// and `map.pgm` to K = 1, for every K up to 8.
-fn assert_matchers_agree(name: &str, args: &[&str]) {
+/// and `map.pgm` to K = 1, for every K up to 8. Returns K = 1's trajectory.
+fn assert_matchers_agree(name: &str, args: &[&str]) -> Vec<u8> {
     let run = |k: usize| {
         let dir = out_dir(&format!("{name}-k{k}"));
         let k_text = k.to_string();
@@ -516,6 +516,7 @@ fn assert_matchers_agree(name: &str, args: &[&str]) {
         moved += resampler["custom"]["particles_moved"]["mean"].as_f64().map_or(0.0, |m| m.ceil()) as u64;
     }
     assert!(moved > 0, "{name}: no particle ever moved between tasks: the exchange went untested");
+    trajectory
 }
 
 #[test]
@@ -526,7 +527,15 @@ fn slam_on_the_simulator_is_the_same_for_every_matcher_count() {
 #[test]
 fn slam_on_an_aces_prefix_is_the_same_for_every_matcher_count() {
     let log = shared_data("laser/aces.clf");
-    assert_matchers_agree("slam-k-aces", &["--log", &log, "--max-scans", "500"]);
+    // Map snapshots every 3 readings, so that the old-map search runs (and
+    // particles move with their snapshots) within the prefix.
+    let args = ["--log", &log, "--max-scans", "500", "--set", "matcher.params.old_map_age=3"];
+    let searched = assert_matchers_agree("slam-k-aces", &args);
+    let dir = out_dir("slam-k-aces-no-old-map");
+    let out = squall(&["slam", "--log", &log, "--max-scans", "500", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let plain = std::fs::read(dir.join("trajectory.tum")).unwrap();
+    assert!(plain != searched, "the old-map search changed nothing: it went untested");
 }
 
 #[test]

@@ -81,7 +81,7 @@ impl HostedModel for SlamModel {
     }
 
     fn memory<'a>(&self, states: impl Iterator<Item = &'a SlamParticle>) -> u64 {
-        TiledGrid::distinct_tiles(states.map(|s| &s.map)).1 as u64
+        TiledGrid::distinct_tiles(states.flat_map(SlamParticle::grids)).1 as u64
     }
 }
 

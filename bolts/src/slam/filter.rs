@@ -59,7 +59,7 @@ impl Rbpf {
 
     /// Distinct map tiles over all particles, and their bytes.
     pub fn map_memory(&self) -> (usize, usize) {
-        TiledGrid::distinct_tiles(self.particles().into_iter().map(|p| &p.map))
+        TiledGrid::distinct_tiles(self.particles().into_iter().flat_map(SlamParticle::grids))
     }
 
     /// The best particle's pose at `odometry`: its last processed pose moved

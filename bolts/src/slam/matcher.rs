@@ -498,6 +498,19 @@ fn likelihood_with(
     (s, l, n)
 }
 
+/// Beams of `scan` whose end point, with the robot at `pose`, lies in a
+/// cell `grid` has seen (crossed or hit): how much of the view a map
+/// covers.
+pub fn covered_beams(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan) -> usize {
+    let laser = pose.compose(&scan.laser_offset);
+    let (s, c) = laser.theta.sin_cos();
+    let seen = |b: &&Beam| {
+        let (cos, sin) = (c * b.cos - s * b.sin, s * b.cos + c * b.sin);
+        grid.get(grid.cell_of(laser.x + b.range * cos, laser.y + b.range * sin)).visits > 0
+    };
+    scan.beams.iter().filter(seen).count()
+}
+
 /// The outcome of one particle's scan matching.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Matched {
@@ -768,38 +781,7 @@ type Lattice = (i64, i64, i64);
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::linemap::LineMap;
-    use crate::slam::integrate::integrate_scan;
-
-    /// A scan of `world` from `pose` (no noise), 360 beams over 360°.
-    fn scan_of(world: &LineMap, pose: &Pose2) -> LaserReading {
-        let n = 360;
-        let inc = 2.0 * std::f64::consts::PI / n as f64;
-        let ranges = (0..n)
-            .map(|i| {
-                world.cast((pose.x, pose.y), pose.theta + i as f64 * inc, 20.0).map_or(30.0, |r| r as f32)
-            })
-            .collect();
-        LaserReading {
-            stamp: 0.0,
-            ranges,
-            angle_min: 0.0,
-            angle_increment: inc,
-            range_min: 0.0,
-            range_max: 30.0,
-            odometry: *pose,
-            laser_offset: Pose2::IDENTITY,
-        }
-    }
-
-    /// An L-shaped room with a pillar: no direction is featureless.
-    fn room() -> LineMap {
-        LineMap::parse(
-            "room",
-            "0,0,8,0\n8,0,8,3\n8,3,5,3\n5,3,5,6\n5,6,0,6\n0,6,0,0\n2,2,2.5,2\n2.5,2,2.5,2.5\n2.5,2.5,2,2.5\n2,2.5,2,2\n",
-        )
-        .unwrap()
-    }
+    use crate::slam::scenes::{mapped, room, scan_of};
 
     /// The room mapped from three poses, the true pose of the scan to
     /// match, default options and that scan.
@@ -810,14 +792,6 @@ mod tests {
         let o = SlamOptions::default();
         let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
         (grid, truth, o, scan)
-    }
-
-    fn mapped(world: &LineMap, poses: &[Pose2]) -> TiledGrid {
-        let mut g = TiledGrid::new(0.05, (0.0, 0.0));
-        for p in poses {
-            integrate_scan(&mut g, p, &scan_of(world, p), 20.0);
-        }
-        g
     }
 
     #[test]

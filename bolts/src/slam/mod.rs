@@ -1,6 +1,6 @@
 //! RBPF SLAM, GMapping-style (Grisetti, Stachniss, Burgard 2007): the pure
 //! algorithm parts: the tiled map, the motion model, the scan matcher, the
-//! particle model, a serial filter, and map transfers between processes.
+//! search against a particle's older map, the particle model, a serial filter, and map transfers between processes.
 //! The topology kinds are in `pf_topology`.
 
 pub mod filter;
@@ -9,5 +9,8 @@ pub mod integrate;
 pub mod matcher;
 pub mod model;
 pub mod motion;
+pub mod old_map;
 pub mod options;
+#[cfg(test)]
+mod scenes;
 pub mod transfer;

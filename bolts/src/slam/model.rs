@@ -10,10 +10,11 @@ use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 use crate::sensor::LaserReading;
-use crate::slam::grid::{TILE_BYTES, TiledGrid};
+use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::motion::sample_motion;
+use crate::slam::old_map::{MapHistory, search_old_map};
 use crate::slam::options::SlamOptions;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
@@ -24,6 +25,20 @@ pub struct SlamParticle {
     pub pose: Pose2,
     /// The particle's map.
     pub map: TiledGrid,
+    /// Snapshots of the map for the old-map search.
+    pub history: MapHistory,
+}
+
+impl SlamParticle {
+    /// The grids the particle holds: its map and its snapshots.
+    pub fn grids(&self) -> impl Iterator<Item = &TiledGrid> {
+        std::iter::once(&self.map).chain(self.history.grids())
+    }
+
+    /// Bytes of the distinct tiles of its grids.
+    pub fn memory(&self) -> usize {
+        TiledGrid::distinct_tiles(self.grids()).1
+    }
 }
 
 /// The odometry between two readings, and the later one's stamp.
@@ -86,7 +101,7 @@ impl ParticleModel for SlamModel {
         let mut map = TiledGrid::new(o.delta, (0.0, 0.0)).with_wall_threshold(o.occupied_threshold);
         integrate_scan(&mut map, &first.odometry, first, o.max_urange);
         map.take_clone_count();
-        SlamParticle { pose: first.odometry, map }
+        SlamParticle { pose: first.odometry, map, history: MapHistory::default() }
     }
 
     fn mark(&self, input: &LaserReading) -> (f64, Pose2) {
@@ -119,7 +134,8 @@ impl ParticleModel for SlamModel {
     fn correct(&self, p: &mut SlamParticle, input: &LaserReading, scratch: &mut SlamScratch) -> Correction {
         let SlamScratch { prepared, matcher } = scratch;
         let prepared = prepared.get_or_insert_with(|| PreparedScan::new(input, &self.options));
-        let m = matcher.refine(&p.map, &p.pose, prepared, &self.options);
+        let climbed = matcher.refine(&p.map, &p.pose, prepared, &self.options);
+        let m = search_old_map(matcher, &p.map, &p.history, climbed, prepared, &self.options);
         // A climb that matched nothing leaves the pose where it was.
         p.pose = m.pose;
         Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations, fit: m.log_likelihood }
@@ -127,6 +143,7 @@ impl ParticleModel for SlamModel {
 
     fn update(&self, p: &mut SlamParticle, input: &LaserReading) -> u64 {
         integrate_scan(&mut p.map, &p.pose, input, self.options.max_urange);
+        p.history.record(&p.map, self.options.old_map_age);
         p.map.take_clone_count()
     }
 
@@ -135,7 +152,7 @@ impl ParticleModel for SlamModel {
     }
 
     fn state_bytes(&self, p: &SlamParticle) -> u64 {
-        (p.map.tile_count() * TILE_BYTES) as u64
+        p.memory() as u64
     }
 
     fn weight_smoothing(&self) -> Real {

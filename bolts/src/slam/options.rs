@@ -114,6 +114,22 @@ pub struct SlamOptions {
     /// The wide search's pose replaces the climb's only if its score is
     /// this many times higher. The default is 1.2.
     pub wide_search_margin: Real,
+    /// Processed readings between snapshots of each particle's map, which
+    /// the old-map search matches against (see [`crate::slam::old_map`]):
+    /// the snapshot searched is 1–2 times this old. 0 turns the search off.
+    /// The default is 50 (about 50 m of travel at the default
+    /// `linear_update`). Off under a cutoff.
+    pub old_map_age: usize,
+    /// The old-map search runs when the climb matches fewer than this
+    /// fraction of the beams (but at least half), in an area the old map
+    /// covers. The default is 0.85.
+    pub old_map_below: Real,
+    /// Half-width of the old-map search in x and y, metres. The default
+    /// is 0.6.
+    pub old_map_reach: Real,
+    /// Half-width of the old-map search in heading, radians. The default
+    /// is 0.1.
+    pub old_map_turn: Real,
     /// How `trajectory.tum` fills in poses between processed scans:
     /// `"interpolate"` spreads each correction back over the scans before
     /// it, `"odometry"` composes the last corrected pose with odometry (as
@@ -151,6 +167,10 @@ impl Default for SlamOptions {
             wide_search_reach: 0.3,
             wide_search_turn: 0.15,
             wide_search_margin: 1.2,
+            old_map_age: 50,
+            old_map_below: 0.85,
+            old_map_reach: 0.6,
+            old_map_turn: 0.1,
             between_scans: BetweenScans::Interpolate,
             resampling: Scheme::LowVariance,
         }
@@ -184,6 +204,8 @@ impl SlamOptions {
             ("ogain", self.ogain),
             ("wide_search_reach", self.wide_search_reach),
             ("wide_search_turn", self.wide_search_turn),
+            ("old_map_reach", self.old_map_reach),
+            ("old_map_turn", self.old_map_turn),
         ] {
             positive(n, v)?;
         }
@@ -196,6 +218,7 @@ impl SlamOptions {
             ("angular_update", self.angular_update),
             ("wide_search_below", self.wide_search_below),
             ("wide_search_margin", self.wide_search_margin),
+            ("old_map_below", self.old_map_below),
         ] {
             non_negative(n, v)?;
         }
