@@ -742,6 +742,26 @@ impl TiledGrid {
         self.tiles.iter().filter(|t| t.is_some()).count()
     }
 
+    /// Tiles of this grid that none of `others` holds in the same place:
+    /// what it adds to them when it is their copy or they are its (a copy
+    /// keeps each shared tile in its place). Unlike
+    /// [`Self::distinct_tiles`], no hashing: cheap enough per particle.
+    pub fn tiles_beyond(&self, others: &[&TiledGrid]) -> usize {
+        let held_by = |o: &TiledGrid, key: (i64, i64), tile: &Arc<Tile>| {
+            o.slot(key).and_then(|i| o.tiles[i].as_ref()).is_some_and(|t| Arc::ptr_eq(t, tile))
+        };
+        let mut beyond = 0;
+        for (slot, tile) in self.tiles.iter().enumerate() {
+            let Some(tile) = tile else { continue };
+            let key = (
+                self.tile_min.0 + (slot % self.tiles_wide) as i64,
+                self.tile_min.1 + (slot / self.tiles_wide) as i64,
+            );
+            beyond += usize::from(!others.iter().any(|o| held_by(o, key, tile)));
+        }
+        beyond
+    }
+
     /// Distinct tiles over several grids (shared tiles counted once), and
     /// their bytes: the memory the maps really take.
     pub fn distinct_tiles<'a>(grids: impl IntoIterator<Item = &'a TiledGrid>) -> (usize, usize) {
@@ -906,6 +926,11 @@ mod tests {
         b.update((6, 0), |c| c.hits += 1);
         assert_eq!(b.take_clone_count(), 0, "the clone is now b's own");
         assert_eq!(TiledGrid::distinct_tiles([&a, &b]).0, 5);
+        assert_eq!((b.tiles_beyond(&[&a]), a.tiles_beyond(&[&b]), b.tiles_beyond(&[])), (1, 1, 4));
+        assert_eq!(a.tiles_beyond(&[&b, &a]), 0);
+        // Shared tiles are found by place even after an index grew.
+        b.update((-500, 300), |c| c.hits += 1);
+        assert_eq!((b.tiles_beyond(&[&a]), a.tiles_beyond(&[&b])), (2, 1));
         assert_eq!(a.get((5, 0)).hits, 0, "the original is untouched");
         assert_eq!(b.get((5, 0)).hits, 1);
     }

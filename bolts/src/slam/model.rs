@@ -10,7 +10,7 @@ use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
 use crate::sensor::LaserReading;
-use crate::slam::grid::TiledGrid;
+use crate::slam::grid::{TILE_BYTES, TiledGrid};
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::motion::sample_motion;
@@ -37,7 +37,13 @@ impl SlamParticle {
 
     /// Bytes of the distinct tiles of its grids.
     pub fn memory(&self) -> usize {
-        TiledGrid::distinct_tiles(self.grids()).1
+        let MapHistory { recent, old, .. } = &self.history;
+        let recent_beyond = recent.as_ref().map_or(0, |r| r.tiles_beyond(&[&self.map]));
+        let old_beyond = old.as_ref().map_or(0, |o| {
+            let newer: Vec<&TiledGrid> = std::iter::once(&self.map).chain(recent.as_ref()).collect();
+            o.tiles_beyond(&newer)
+        });
+        (self.map.tile_count() + recent_beyond + old_beyond) * TILE_BYTES
     }
 }
 
