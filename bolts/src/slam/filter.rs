@@ -57,7 +57,8 @@ impl Rbpf {
         self.filter.best_state()
     }
 
-    /// Distinct map tiles over all particles, and their bytes.
+    /// Distinct tiles over all particles' maps and snapshots, and their
+    /// bytes.
     pub fn map_memory(&self) -> (usize, usize) {
         TiledGrid::distinct_tiles(self.particles().into_iter().flat_map(SlamParticle::grids))
     }

@@ -253,5 +253,9 @@ mod tests {
         assert!(toml::from_str::<SlamOptions>("partcles = 3").unwrap_err().to_string().contains("partcles"));
         assert!(SlamOptions { kernel: 9, ..SlamOptions::default() }.check().is_err());
         assert!(SlamOptions { iterations: 31, ..SlamOptions::default() }.check().is_err());
+        assert!(SlamOptions { old_map_reach: 0.0, ..SlamOptions::default() }.check().is_err());
+        assert!(SlamOptions { old_map_below: -0.1, ..SlamOptions::default() }.check().is_err());
+        let o: SlamOptions = toml::from_str("old_map_age = 0").unwrap();
+        assert_eq!((o.old_map_age, o.old_map_below), (0, 0.85));
     }
 }
