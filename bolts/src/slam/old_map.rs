@@ -147,8 +147,8 @@ mod tests {
     /// half-scans the particle placed `drift` off on its way back, so that
     /// a climb from its drifted belief aligns the scan with those and
     /// leaves the rest of the view unmatched. Returns (old, now, truth,
-    /// belief, scan).
-    fn reentry(drift: (f64, f64, f64)) -> (TiledGrid, TiledGrid, Pose2, Pose2, PreparedScan) {
+    /// scan, the climb from the belief).
+    fn reentry(drift: (f64, f64, f64)) -> (TiledGrid, TiledGrid, Pose2, PreparedScan, Matched) {
         let world = room();
         let truth = Pose2::new(3.3, 1.7, 0.4);
         let old = mapped(&world, &[truth, Pose2::new(1.0, 4.0, -1.0), Pose2::new(6.5, 1.5, 2.0)]);
@@ -160,19 +160,18 @@ mod tests {
             integrate_scan(&mut now, &off(&p), &half, 20.0);
         }
         let scan = PreparedScan::new(&scan_of(&world, &truth), &SlamOptions::default());
-        (old, now, truth, off(&truth), scan)
+        let climbed = Matcher::default().refine(&now, &off(&truth), &scan, &SlamOptions::default());
+        (old, now, truth, scan, climbed)
     }
 
     #[test]
     fn the_old_map_brings_a_drifted_particle_back() {
         let o = SlamOptions::default();
-        let (old, now, truth, belief, scan) = reentry((0.4, 0.3, 0.03));
-        let mut matcher = Matcher::default();
-        let climbed = matcher.refine(&now, &belief, &scan, &o);
+        let (old, now, truth, scan, climbed) = reentry((0.4, 0.3, 0.03));
         assert!(climbed.pose.distance(&truth) > 0.2, "the climb keeps the drift: {:?}", climbed.pose);
         assert!((climbed.matched_beams as Real) < o.old_map_below * scan.len() as Real, "a weak match");
         let history = MapHistory { updates: 100, recent: None, old: Some(old) };
-        let found = search_old_map(&mut matcher, &now, &history, climbed, &scan, &o);
+        let found = search_old_map(&mut Matcher::default(), &now, &history, climbed, &scan, &o);
         assert!(found.pose.distance(&truth) < 0.03, "{:?} vs {truth:?}", found.pose);
         assert!((found.pose.theta - truth.theta).abs() < 0.01, "{:?}", found.pose);
         assert!(found.evaluations > climbed.evaluations + 13 * 13 * 13, "the search is counted");
@@ -182,9 +181,8 @@ mod tests {
     #[test]
     fn the_search_runs_only_where_it_is_meant_to() {
         let o = SlamOptions::default();
-        let (old, now, _, belief, scan) = reentry((0.4, 0.3, 0.03));
+        let (old, now, _, scan, climbed) = reentry((0.4, 0.3, 0.03));
         let mut matcher = Matcher::default();
-        let climbed = matcher.refine(&now, &belief, &scan, &o);
         let with_old = |old: Option<TiledGrid>| MapHistory { updates: 100, recent: None, old };
         let search =
             |m: &mut Matcher, h: &MapHistory, o: &SlamOptions| search_old_map(m, &now, h, climbed, &scan, o);
@@ -199,8 +197,7 @@ mod tests {
         let off = SlamOptions { old_map_below: 0.0, ..o.clone() };
         assert_eq!(search(&mut matcher, &history, &off), climbed);
         // A particle that never drifted matches well: nothing to search.
-        let (old, now, truth, _, scan) = reentry((0.0, 0.0, 0.0));
-        let aligned = matcher.refine(&now, &truth, &scan, &o);
+        let (old, now, _, scan, aligned) = reentry((0.0, 0.0, 0.0));
         let history = with_old(Some(old));
         assert_eq!(search_old_map(&mut matcher, &now, &history, aligned, &scan, &o), aligned);
     }
