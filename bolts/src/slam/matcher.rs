@@ -583,6 +583,20 @@ impl Matcher {
         }
     }
 
+    /// [`likelihood_and_score`] with this matcher's scratch memory (no
+    /// allocation once warm).
+    pub fn likelihood(
+        &mut self,
+        grid: &TiledGrid,
+        pose: &Pose2,
+        scan: &PreparedScan,
+        o: &SlamOptions,
+    ) -> (Real, Real, usize) {
+        self.cache.forget();
+        directions(grid, scan, laser_heading(pose, scan), &mut self.turned_dirs);
+        likelihood_with(grid, pose, scan, &self.turned_dirs, o, &mut self.cache)
+    }
+
     /// Hill-climbs the score from `init` (GMapping's `optimize`).
     pub fn optimize(
         &mut self,
@@ -942,6 +956,10 @@ mod tests {
         let (s, l, n) = likelihood_and_score(&grid, &truth, &scan, &o);
         let (_, l_off, _) = likelihood_and_score(&grid, &off, &scan, &o);
         assert!(s > 0.0 && n > 300 && l > l_off, "{s} {l} {n} {l_off}");
+        // The same from a matcher that last matched on another map.
+        let mut reused = Matcher::default();
+        reused.optimize(&mapped(&world, &[off]), &off, &scan, &o);
+        assert_eq!(reused.likelihood(&grid, &truth, &scan, &o), (s, l, n));
     }
 
     #[test]

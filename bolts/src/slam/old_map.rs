@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::Real;
 use crate::slam::grid::TiledGrid;
-use crate::slam::matcher::{Matched, Matcher, PreparedScan, covered_beams, likelihood_and_score};
+use crate::slam::matcher::{Matched, Matcher, PreparedScan, covered_beams};
 use crate::slam::options::{Cutoff, SlamOptions};
 
 /// Snapshots of a particle's map: `recent` taken at the last multiple of
@@ -98,7 +98,7 @@ pub fn search_old_map(
     if (covered_beams(old, &climbed.pose, scan) as Real) < COVERED * beams {
         return climbed;
     }
-    let (here, _, _) = likelihood_and_score(old, &climbed.pose, scan, o);
+    let (here, _, _) = matcher.likelihood(old, &climbed.pose, scan, o);
     let found =
         matcher.wide_search(old, &climbed.pose, scan, o, o.old_map_reach, o.old_map_turn, OLD_MAP_STEPS);
     let evaluations = climbed.evaluations + found.evaluations;
