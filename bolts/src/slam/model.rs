@@ -39,9 +39,9 @@ impl SlamParticle {
     pub fn memory(&self) -> usize {
         let MapHistory { recent, old, .. } = &self.history;
         let recent_beyond = recent.as_ref().map_or(0, |r| r.tiles_beyond(&[&self.map]));
-        let old_beyond = old.as_ref().map_or(0, |o| {
-            let newer: Vec<&TiledGrid> = std::iter::once(&self.map).chain(recent.as_ref()).collect();
-            o.tiles_beyond(&newer)
+        let old_beyond = old.as_ref().map_or(0, |o| match recent {
+            Some(r) => o.tiles_beyond(&[&self.map, r]),
+            None => o.tiles_beyond(&[&self.map]),
         });
         (self.map.tile_count() + recent_beyond + old_beyond) * TILE_BYTES
     }
