@@ -262,6 +262,31 @@ impl Tile {
     }
 }
 
+/// Hashes tile addresses for [`TiledGrid::distinct_tiles`], which runs
+/// every reading over every particle's tiles: an address is unique already,
+/// so a multiplication and a fold spread it (with SipHash, the default,
+/// hashing took about 4% of a whole ACES run, `perf`; with this, 1.8%).
+#[derive(Debug, Default)]
+struct AddressHasher(u64);
+
+impl std::hash::Hasher for AddressHasher {
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 29)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_usize(b as usize ^ self.0 as usize);
+        }
+    }
+
+    fn write_usize(&mut self, n: usize) {
+        self.0 = (n as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+}
+
+type BuildAddressHasher = std::hash::BuildHasherDefault<AddressHasher>;
+
 /// Bytes one tile occupies.
 pub const TILE_BYTES: usize = std::mem::size_of::<Cells>() + 8 * TILE_SIDE;
 
@@ -765,7 +790,7 @@ impl TiledGrid {
     /// Distinct tiles over several grids (shared tiles counted once), and
     /// their bytes: the memory the maps really take.
     pub fn distinct_tiles<'a>(grids: impl IntoIterator<Item = &'a TiledGrid>) -> (usize, usize) {
-        let mut seen = std::collections::HashSet::new();
+        let mut seen = std::collections::HashSet::<_, BuildAddressHasher>::default();
         for g in grids {
             for t in g.tiles.iter().flatten() {
                 seen.insert(Arc::as_ptr(t));

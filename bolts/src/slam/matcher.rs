@@ -39,6 +39,15 @@ struct Beam {
     sin: Real,
 }
 
+impl Beam {
+    /// (cos, sin) of the beam's direction with the laser at the heading
+    /// whose (cos, sin) are (`c`, `s`): a rotation, no trigonometry.
+    #[inline]
+    fn turned(&self, c: Real, s: Real) -> (Real, Real) {
+        (c * self.cos - s * self.sin, s * self.cos + c * self.sin)
+    }
+}
+
 /// A reading prepared for matching: usable beams only.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PreparedScan {
@@ -118,7 +127,7 @@ fn directions(grid: &TiledGrid, scan: &PreparedScan, theta: Real, out: &mut Vec<
     let (s, c) = theta.sin_cos();
     out.clear();
     out.extend(scan.beams.iter().map(|b| {
-        let (cos, sin) = (c * b.cos - s * b.sin, s * b.cos + c * b.sin);
+        let (cos, sin) = b.turned(c, s);
         let (dx, dy) = (b.range * cos, b.range * sin);
         let back = (step_back(cos), step_back(sin));
         Direction {
@@ -471,9 +480,7 @@ pub fn likelihood_and_score(
     scan: &PreparedScan,
     o: &SlamOptions,
 ) -> (Real, Real, usize) {
-    let mut dirs = Vec::with_capacity(scan.beams.len());
-    directions(grid, scan, laser_heading(pose, scan), &mut dirs);
-    likelihood_with(grid, pose, scan, &dirs, o, &mut BeamCache::default())
+    Matcher::default().likelihood(grid, pose, scan, o)
 }
 
 fn likelihood_with(
@@ -505,7 +512,7 @@ pub fn covered_beams(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan) -> usi
     let laser = pose.compose(&scan.laser_offset);
     let (s, c) = laser.theta.sin_cos();
     let seen = |b: &&Beam| {
-        let (cos, sin) = (c * b.cos - s * b.sin, s * b.cos + c * b.sin);
+        let (cos, sin) = b.turned(c, s);
         grid.get(grid.cell_of(laser.x + b.range * cos, laser.y + b.range * sin)).visits > 0
     };
     scan.beams.iter().filter(seen).count()
