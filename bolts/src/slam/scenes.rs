@@ -8,7 +8,7 @@ use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
 
 /// A scan of `world` from `pose` (no noise), 360 beams over 360°.
-pub fn scan_of(world: &LineMap, pose: &Pose2) -> LaserReading {
+pub(super) fn scan_of(world: &LineMap, pose: &Pose2) -> LaserReading {
     let n = 360;
     let inc = 2.0 * std::f64::consts::PI / n as f64;
     let ranges = (0..n)
@@ -27,7 +27,7 @@ pub fn scan_of(world: &LineMap, pose: &Pose2) -> LaserReading {
 }
 
 /// An L-shaped room with a pillar: no direction is featureless.
-pub fn room() -> LineMap {
+pub(super) fn room() -> LineMap {
     LineMap::parse(
         "room",
         "0,0,8,0\n8,0,8,3\n8,3,5,3\n5,3,5,6\n5,6,0,6\n0,6,0,0\n2,2,2.5,2\n2.5,2,2.5,2.5\n2.5,2.5,2,2.5\n2,2.5,2,2\n",
@@ -36,7 +36,7 @@ pub fn room() -> LineMap {
 }
 
 /// `world` mapped (5 cm cells) from `poses`, scans without noise.
-pub fn mapped(world: &LineMap, poses: &[Pose2]) -> TiledGrid {
+pub(super) fn mapped(world: &LineMap, poses: &[Pose2]) -> TiledGrid {
     let mut g = TiledGrid::new(0.05, (0.0, 0.0));
     for p in poses {
         integrate_scan(&mut g, p, &scan_of(world, p), 20.0);
