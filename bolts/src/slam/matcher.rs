@@ -119,14 +119,27 @@ fn step_back(c: Real) -> i64 {
     i64::from(c <= -HALF_STEP) - i64::from(c >= HALF_STEP)
 }
 
+/// A scan's beam directions at one heading.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Turned {
+    dirs: Vec<Direction>,
+    /// Whether every beam is shorter than 2³⁰ cells: then, with the laser
+    /// anywhere [`TiledGrid::fixed_of`] places it, every end point's cell
+    /// fits in an `i32` (the cache's key) without a check per beam.
+    short: bool,
+}
+
+/// Beam length, in fixed-point units, up to which [`Turned::short`] holds.
+const SHORT_BEAM: i64 = 1 << (30 + FIXED_BITS);
+
 /// The directions of every beam with the laser at heading `theta`. Moves
 /// that only translate keep the heading, so the hill climber computes these
 /// once per heading rather than once per pose; each beam's direction is
 /// its laser-frame direction rotated, with no trigonometry per beam.
-fn directions(grid: &TiledGrid, scan: &PreparedScan, theta: Real, out: &mut Vec<Direction>) {
+fn directions(grid: &TiledGrid, scan: &PreparedScan, theta: Real, out: &mut Turned) {
     let (s, c) = theta.sin_cos();
-    out.clear();
-    out.extend(scan.beams.iter().map(|b| {
+    out.dirs.clear();
+    out.dirs.extend(scan.beams.iter().map(|b| {
         let (cos, sin) = b.turned(c, s);
         let (dx, dy) = (b.range * cos, b.range * sin);
         let back = (step_back(cos), step_back(sin));
@@ -138,6 +151,7 @@ fn directions(grid: &TiledGrid, scan: &PreparedScan, theta: Real, out: &mut Vec<
             back_code: back_code(back),
         }
     }));
+    out.short = out.dirs.iter().all(|d| d.fixed.0.abs() < SHORT_BEAM && d.fixed.1.abs() < SHORT_BEAM);
 }
 
 /// 2^(−j/16) for j = 0..16.
@@ -185,16 +199,13 @@ fn exp_neg(x: Real) -> Real {
 /// once. The result is exactly that of [`TiledGrid::nearest_backed_wall`].
 #[derive(Debug)]
 struct BeamCache {
-    slots: Vec<Slot>,
+    slots: Box<[Slot; CACHE_SLOTS]>,
     /// Slots of other generations are empty: forgetting a map is a counter
     /// increment, not a pass over the table.
     generation: u32,
     /// Candidates beyond a slot's first [`INLINE`] (a window with more
     /// walls than that is rare).
     overflow: Vec<(f32, f32)>,
-    /// The exponents d²/σ of a run of beams of the pose being scored (a
-    /// buffer on the heap: as a local array the score ran a tenth slower).
-    exponents: Vec<Real>,
 }
 
 /// Candidates a slot holds itself.
@@ -209,7 +220,8 @@ struct Slot {
     /// First, so that each is one aligned vector load.
     xs: [f32; INLINE],
     ys: [f32; INLINE],
-    cell: (i32, i32),
+    /// The cell, packed by [`cell_key`].
+    key: u64,
     /// The generation in the high bits, the step back in the low four.
     tag: u32,
     overflow_start: u32,
@@ -225,7 +237,7 @@ const _: () = assert!(
 );
 
 const EMPTY_SLOT: Slot = Slot {
-    cell: (0, 0),
+    key: 0,
     tag: 0,
     overflow_len: 0,
     overflow_start: 0,
@@ -243,10 +255,9 @@ const GENERATIONS: u32 = 1 << 28;
 impl Default for BeamCache {
     fn default() -> Self {
         BeamCache {
-            slots: vec![EMPTY_SLOT; CACHE_SLOTS],
+            slots: vec![EMPTY_SLOT; CACHE_SLOTS].into_boxed_slice().try_into().expect("CACHE_SLOTS slots"),
             generation: 1,
             overflow: Vec::new(),
-            exponents: Vec::new(),
         }
     }
 }
@@ -273,50 +284,148 @@ impl BeamCache {
         back_code: u32,
         k: i64,
     ) -> Option<Real> {
-        let (hx, hy) = hit;
-        let (Ok(x), Ok(y)) = (i32::try_from(c.0), i32::try_from(c.1)) else {
-            // Cells beyond ±2³¹ (thousands of kilometres) are not cached.
-            let mut best = f32::INFINITY;
-            grid.backed_walls(c, back, k, |mx, my| best = best.min((hx - mx).powi(2) + (hy - my).powi(2)));
-            return (best < f32::INFINITY).then_some(Real::from(best));
+        let Some(key) = cell_key(c) else {
+            return uncached_nearest(grid, c, hit, back, k);
         };
-        let hash = (x as u32).wrapping_mul(0x9e37_79b1) ^ (y as u32).wrapping_mul(0x85eb_ca77) ^ back_code;
-        let index = (hash.wrapping_mul(0xc2b2_ae3d) >> (32 - CACHE_SLOTS.trailing_zeros())) as usize;
-        let mut tag = (self.generation << 4) | back_code;
-        if self.slots[index].tag != tag || self.slots[index].cell != (x, y) {
-            if self.overflow.len() > CACHE_CAPACITY {
-                self.forget();
-                tag = (self.generation << 4) | back_code;
-            }
-            let BeamCache { slots, overflow, .. } = self;
-            let slot = &mut slots[index];
-            *slot = Slot { cell: (x, y), tag, ..EMPTY_SLOT };
-            let start = overflow.len();
-            let mut found = 0;
-            grid.backed_walls(c, back, k, |mx, my| {
-                if found < INLINE {
-                    slot.xs[found] = mx;
-                    slot.ys[found] = my;
-                } else {
-                    overflow.push((mx, my));
-                }
-                found += 1;
-            });
-            if found > INLINE {
-                slot.overflow_start = start as u32;
-                slot.overflow_len = (found - INLINE) as u16;
-            }
+        let index = slot_index(key, back_code);
+        if !self.holds(index, key, (self.generation << 4) | back_code) {
+            self.fill(index, grid, c, key, back, k);
         }
-        let slot = &self.slots[index];
-        let mut best = nearest_inline(slot, hx, hy);
-        if slot.overflow_len > 0 {
-            let start = slot.overflow_start as usize;
-            for &(mx, my) in &self.overflow[start..start + slot.overflow_len as usize] {
-                best = best.min((hx - mx).powi(2) + (hy - my).powi(2));
-            }
-        }
+        let best = self.distance(index, hit);
         (best < f32::INFINITY).then_some(Real::from(best))
     }
+
+    /// Whether slot `index` holds the cell `key` with `tag` (the current
+    /// generation and the step back).
+    #[inline(always)]
+    fn holds(&self, index: usize, key: u64, tag: u32) -> bool {
+        let slot = &self.slots[index];
+        slot.tag == tag && slot.key == key
+    }
+
+    /// Stores in slot `index` the candidates of cell `c` (packed: `key`)
+    /// seen with step back `back`. Out of line: the hot loop stays small.
+    #[inline(never)]
+    fn fill(&mut self, index: usize, grid: &TiledGrid, c: (i64, i64), key: u64, back: (i64, i64), k: i64) {
+        if self.overflow.len() > CACHE_CAPACITY {
+            self.forget();
+        }
+        let tag = (self.generation << 4) | back_code(back);
+        let BeamCache { slots, overflow, .. } = self;
+        let slot = &mut slots[index];
+        *slot = Slot { key, tag, ..EMPTY_SLOT };
+        let start = overflow.len();
+        let mut found = 0;
+        grid.backed_walls(c, back, k, |mx, my| {
+            if found < INLINE {
+                slot.xs[found] = mx;
+                slot.ys[found] = my;
+            } else {
+                overflow.push((mx, my));
+            }
+            found += 1;
+        });
+        if found > INLINE {
+            slot.overflow_start = start as u32;
+            slot.overflow_len = (found - INLINE) as u16;
+        }
+    }
+
+    /// The least squared distance from `hit` to the candidates of slot
+    /// `index` (infinite if it has none).
+    #[inline(always)]
+    fn distance(&self, index: usize, hit: (f32, f32)) -> f32 {
+        let slot = &self.slots[index];
+        let best = nearest_inline(slot, hit.0, hit.1);
+        if slot.overflow_len > 0 { self.overflow_distance(slot, hit, best) } else { best }
+    }
+
+    /// [`Self::distance`] over a slot's overflow candidates.
+    #[cold]
+    fn overflow_distance(&self, slot: &Slot, hit: (f32, f32), mut best: f32) -> f32 {
+        let start = slot.overflow_start as usize;
+        for &(mx, my) in &self.overflow[start..start + slot.overflow_len as usize] {
+            best = best.min((hit.0 - mx).powi(2) + (hit.1 - my).powi(2));
+        }
+        best
+    }
+
+    /// For each beam of `run` (at most [`BOUND_CHECK_BEAMS`]) with the laser
+    /// at `laser` (whose fixed-point position is `base`): the exponents
+    /// d²·`per_sigma` of the beams that match, packed in order into
+    /// `exponents`; returns how many matched. [`Self::nearest`] beam by
+    /// beam, as one loop with no call and no branch but the cache's.
+    /// `SHORT`: the beams are [`Turned::short`], so no cell needs a check
+    /// that it fits the cache's key.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn match_run<const SHORT: bool>(
+        &mut self,
+        grid: &TiledGrid,
+        laser: &LaserAt,
+        base: (i64, i64),
+        run: &[Direction],
+        k: i64,
+        per_sigma: Real,
+        exponents: &mut [Real; BOUND_CHECK_BEAMS],
+    ) -> usize {
+        let mut matched = 0;
+        let mut generation = self.generation << 4;
+        for d in run {
+            let c = ((base.0 + d.fixed.0) >> FIXED_BITS, (base.1 + d.fixed.1) >> FIXED_BITS);
+            let hit = ((laser.x + d.dx) as f32, (laser.y + d.dy) as f32);
+            let key =
+                if SHORT { Some(u64::from(c.0 as u32) | (u64::from(c.1 as u32) << 32)) } else { cell_key(c) };
+            let best = match key {
+                Some(key) => {
+                    let index = slot_index(key, d.back_code);
+                    if !self.holds(index, key, generation | d.back_code) {
+                        self.fill(index, grid, c, key, d.back, k);
+                        generation = self.generation << 4;
+                    }
+                    self.distance(index, hit)
+                }
+                None => uncached_nearest(grid, c, hit, d.back, k).map_or(f32::INFINITY, |d2| d2 as f32),
+            };
+            // `matched` never exceeds the beams seen, fewer than the
+            // buffer's length: the mask only spares a bounds check.
+            exponents[matched & (BOUND_CHECK_BEAMS - 1)] = Real::from(best) * per_sigma;
+            matched += usize::from(best < f32::INFINITY);
+        }
+        matched
+    }
+}
+
+/// A cell as one number (the cache's key), `None` beyond ±2³¹ cells
+/// (thousands of kilometres), which are not cached.
+#[inline(always)]
+fn cell_key(c: (i64, i64)) -> Option<u64> {
+    let (Ok(x), Ok(y)) = (i32::try_from(c.0), i32::try_from(c.1)) else { return None };
+    Some(u64::from(x as u32) | (u64::from(y as u32) << 32))
+}
+
+/// The table slot of the cell packed as `key`, seen with step back
+/// `back_code`.
+#[inline(always)]
+fn slot_index(key: u64, back_code: u32) -> usize {
+    let (x, y) = (key as u32, (key >> 32) as u32);
+    let hash = x.wrapping_mul(0x9e37_79b1) ^ y.wrapping_mul(0x85eb_ca77) ^ back_code;
+    (hash.wrapping_mul(0xc2b2_ae3d) >> (32 - CACHE_SLOTS.trailing_zeros())) as usize
+}
+
+/// [`TiledGrid::nearest_backed_wall`] for cells the cache does not hold.
+#[cold]
+fn uncached_nearest(
+    grid: &TiledGrid,
+    c: (i64, i64),
+    hit: (f32, f32),
+    back: (i64, i64),
+    k: i64,
+) -> Option<Real> {
+    let (hx, hy) = hit;
+    let mut best = f32::INFINITY;
+    grid.backed_walls(c, back, k, |mx, my| best = best.min((hx - mx).powi(2) + (hy - my).powi(2)));
+    (best < f32::INFINITY).then_some(Real::from(best))
 }
 
 /// The least squared distance from (`hx`, `hy`) to a slot's inline
@@ -431,45 +540,53 @@ fn score_with(
     grid: &TiledGrid,
     pose: &Pose2,
     scan: &PreparedScan,
-    dirs: &[Direction],
+    turned: &Turned,
     o: &SlamOptions,
     cache: &mut BeamCache,
     to_beat: Real,
 ) -> Option<Real> {
     let per_sigma = 1.0 / o.sigma;
     let laser = LaserAt::new(grid, pose, scan);
-    let mut exponents = std::mem::take(&mut cache.exponents);
-    exponents.resize(BOUND_CHECK_BEAMS, 0.0);
+    let mut exponents = [0.0; BOUND_CHECK_BEAMS];
     let mut s: Real = 0.0;
-    let mut left = dirs.len();
-    for run in dirs.chunks(BOUND_CHECK_BEAMS) {
+    let mut left = turned.dirs.len();
+    for run in turned.dirs.chunks(BOUND_CHECK_BEAMS) {
         // Matched beams' exponents only, packed without a branch: a beam
         // that matches nothing adds e^(−∞) = 0, which changes no sum.
-        let mut matched = 0;
-        laser.match_beams(grid, run, o, cache, |d2| {
-            if let Some(e) = exponents.get_mut(matched) {
-                *e = d2.unwrap_or(0.0) * per_sigma;
+        let matched = match laser.fixed {
+            Some(base) if turned.short => {
+                cache.match_run::<true>(grid, &laser, base, run, o.kernel, per_sigma, &mut exponents)
             }
-            matched += usize::from(d2.is_some());
-        });
+            Some(base) => {
+                cache.match_run::<false>(grid, &laser, base, run, o.kernel, per_sigma, &mut exponents)
+            }
+            None => {
+                let mut matched = 0;
+                laser.match_beams(grid, run, o, cache, |d2| {
+                    if let Some(d2) = d2 {
+                        exponents[matched] = d2 * per_sigma;
+                        matched += 1;
+                    }
+                });
+                matched
+            }
+        };
         for &x in &exponents[..matched] {
             s += exp_neg(x);
         }
         left -= run.len();
         if s + left as Real + BOUND_SLACK < to_beat {
-            cache.exponents = exponents;
             return None;
         }
     }
-    cache.exponents = exponents;
     Some(s)
 }
 
 /// The matching score of `pose` (higher is better).
 pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
-    let mut dirs = Vec::with_capacity(scan.beams.len());
-    directions(grid, scan, laser_heading(pose, scan), &mut dirs);
-    score_with(grid, pose, scan, &dirs, o, &mut BeamCache::default(), Real::NEG_INFINITY)
+    let mut turned = Turned::default();
+    directions(grid, scan, laser_heading(pose, scan), &mut turned);
+    score_with(grid, pose, scan, &turned, o, &mut BeamCache::default(), Real::NEG_INFINITY)
         .expect("nothing is beaten by −∞")
 }
 
@@ -487,14 +604,14 @@ fn likelihood_with(
     grid: &TiledGrid,
     pose: &Pose2,
     scan: &PreparedScan,
-    dirs: &[Direction],
+    turned: &Turned,
     o: &SlamOptions,
     cache: &mut BeamCache,
 ) -> (Real, Real, usize) {
     let (mut s, mut l, mut n) = (0.0, 0.0, 0);
     let no_hit = NULL_LIKELIHOOD / o.lsigma;
     let per_sigma = 1.0 / o.sigma;
-    LaserAt::new(grid, pose, scan).match_beams(grid, dirs, o, cache, |d2| match d2 {
+    LaserAt::new(grid, pose, scan).match_beams(grid, &turned.dirs, o, cache, |d2| match d2 {
         Some(d2) => {
             s += exp_neg(d2 * per_sigma);
             l += -d2 / o.lsigma;
@@ -556,7 +673,7 @@ pub struct Matcher {
     /// The climb's beam directions by heading.
     headings: Headings,
     /// The wide search's beam directions at its heading.
-    turned_dirs: Vec<Direction>,
+    turned: Turned,
     seen: Vec<Lattice>,
     /// The wide search's subsample of the scan.
     coarse_scan: PreparedScan,
@@ -600,8 +717,8 @@ impl Matcher {
         o: &SlamOptions,
     ) -> (Real, Real, usize) {
         self.cache.forget();
-        directions(grid, scan, laser_heading(pose, scan), &mut self.turned_dirs);
-        likelihood_with(grid, pose, scan, &self.turned_dirs, o, &mut self.cache)
+        directions(grid, scan, laser_heading(pose, scan), &mut self.turned);
+        likelihood_with(grid, pose, scan, &self.turned, o, &mut self.cache)
     }
 
     /// Hill-climbs the score from `init` (GMapping's `optimize`).
@@ -643,7 +760,7 @@ impl Matcher {
                 grid,
                 coarse,
                 laser_heading(&Pose2::new(init.x, init.y, theta), scan),
-                &mut self.turned_dirs,
+                &mut self.turned,
             );
             for i in -steps..=steps {
                 for j in -steps..=steps {
@@ -652,7 +769,7 @@ impl Matcher {
                         init.y + reach * Real::from(j) / Real::from(steps),
                         theta,
                     );
-                    let s = score_with(grid, &pose, coarse, &self.turned_dirs, o, &mut self.cache, best.0);
+                    let s = score_with(grid, &pose, coarse, &self.turned, o, &mut self.cache, best.0);
                     evaluations += 1;
                     if let Some(s) = s.filter(|&s| s > best.0) {
                         best = (s, pose);
@@ -755,7 +872,7 @@ impl Matcher {
 /// computed once per climb rather than once per turn.
 #[derive(Debug, Default)]
 struct Headings {
-    entries: [(Option<i64>, Vec<Direction>); HEADINGS],
+    entries: [(Option<i64>, Turned); HEADINGS],
     /// The entry to reuse next.
     next: usize,
 }
@@ -774,7 +891,7 @@ impl Headings {
 
     /// The entry holding the directions at lattice heading `index`, filled
     /// by `fill` if none does, in an entry other than the two in `keep`.
-    fn slot(&mut self, index: i64, keep: [usize; 2], fill: impl FnOnce(&mut Vec<Direction>)) -> usize {
+    fn slot(&mut self, index: i64, keep: [usize; 2], fill: impl FnOnce(&mut Turned)) -> usize {
         if let Some(found) = self.entries.iter().position(|e| e.0 == Some(index)) {
             return found;
         }
@@ -790,7 +907,7 @@ impl Headings {
     }
 
     /// The directions in entry `slot`.
-    fn at(&self, slot: usize) -> &[Direction] {
+    fn at(&self, slot: usize) -> &Turned {
         &self.entries[slot].1
     }
 }
@@ -815,11 +932,55 @@ mod tests {
         (grid, truth, o, scan)
     }
 
+    /// The score as the grid's own kernel search gives it, beam by beam in
+    /// order, with nothing cached.
+    fn reference_score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
+        let laser = pose.compose(&scan.laser_offset);
+        let (s, c) = laser.theta.sin_cos();
+        let mut score = 0.0;
+        for b in &scan.beams {
+            let (cos, sin) = b.turned(c, s);
+            let end = (laser.x + b.range * cos, laser.y + b.range * sin);
+            if let Some(d2) = grid.nearest_backed_wall(end, (step_back(cos), step_back(sin)), o.kernel) {
+                score += exp_neg(d2 / o.sigma);
+            }
+        }
+        score
+    }
+
+    #[test]
+    fn the_score_is_the_grid_kernel_search_summed() {
+        let (grid, truth, o, scan) = scene();
+        // A beam whose cell lies beyond ±2³¹ cells: the scan is no longer
+        // short, and that beam is matched uncached.
+        let mut far_reading = scan_of(&room(), &truth);
+        far_reading.range_max = 1e9;
+        far_reading.ranges[7] = 2e8;
+        let far_options = SlamOptions { max_urange: 1e9, ..o.clone() };
+        let far = PreparedScan::new(&far_reading, &far_options);
+        let mut cache = BeamCache::default();
+        for (scan, o, short) in [(&scan, &o, true), (&far, &far_options, false)] {
+            for (i, dx) in [-0.3, -0.05, 0.0, 0.02, 0.2].into_iter().enumerate() {
+                let pose = Pose2::new(truth.x + dx, truth.y - dx, truth.theta + 0.5 * dx);
+                let mut turned = Turned::default();
+                directions(&grid, scan, laser_heading(&pose, scan), &mut turned);
+                assert_eq!(turned.short, short);
+                let want = reference_score(&grid, &pose, scan, o);
+                assert!(want > 10.0, "pose {i} matches beams ({want})");
+                for _ in 0..2 {
+                    // Cold, then from the cache: the same sum, bit for bit.
+                    let got = score_with(&grid, &pose, scan, &turned, o, &mut cache, Real::NEG_INFINITY);
+                    assert_eq!(got.map(Real::to_bits), Some(want.to_bits()), "pose {i}, short {short}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_bounded_score_gives_up_only_on_poses_that_cannot_win() {
         let (grid, truth, o, scan) = scene();
         let mut cache = BeamCache::default();
-        let (mut dirs, mut given_up) = (Vec::new(), 0);
+        let (mut dirs, mut given_up) = (Turned::default(), 0);
         for (i, dx) in [-0.3, -0.05, 0.0, 0.02, 0.2].into_iter().enumerate() {
             let pose = Pose2::new(truth.x + dx, truth.y - dx, truth.theta + 0.5 * dx);
             directions(&grid, &scan, laser_heading(&pose, &scan), &mut dirs);
