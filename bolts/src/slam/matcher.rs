@@ -516,8 +516,10 @@ impl LaserAt {
 }
 
 /// Beams scored between checks of whether a pose can still beat the one
-/// to beat (see [`score_with`]).
+/// to beat (see [`score_with`]). A power of two: [`BeamCache::match_run`]
+/// masks its buffer index with it.
 const BOUND_CHECK_BEAMS: usize = 16;
+const _: () = assert!(BOUND_CHECK_BEAMS.is_power_of_two());
 
 /// Slack for float rounding in the bound of [`score_with`]: far above the
 /// rounding of a sum of a few thousand terms of at most 1, far below any
