@@ -935,8 +935,10 @@ mod tests {
     }
 
     /// The score as the grid's own kernel search gives it, beam by beam in
-    /// order, with nothing cached.
+    /// order, with nothing cached (d²/σ as the matcher rounds it: times
+    /// 1/σ).
     fn reference_score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
+        let per_sigma = 1.0 / o.sigma;
         let laser = pose.compose(&scan.laser_offset);
         let (s, c) = laser.theta.sin_cos();
         let mut score = 0.0;
@@ -944,7 +946,7 @@ mod tests {
             let (cos, sin) = b.turned(c, s);
             let end = (laser.x + b.range * cos, laser.y + b.range * sin);
             if let Some(d2) = grid.nearest_backed_wall(end, (step_back(cos), step_back(sin)), o.kernel) {
-                score += exp_neg(d2 / o.sigma);
+                score += exp_neg(d2 * per_sigma);
             }
         }
         score

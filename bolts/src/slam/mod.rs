@@ -1,6 +1,7 @@
 //! RBPF SLAM, GMapping-style (Grisetti, Stachniss, Burgard 2007): the pure
 //! algorithm parts: the tiled map, the motion model, the scan matcher, the
-//! search against a particle's older map, the particle model, a serial filter, and map transfers between processes.
+//! search against a particle's older map, the particle model, a serial
+//! filter, and map transfers between processes.
 //! The topology kinds are in `pf_topology`.
 
 pub mod filter;
