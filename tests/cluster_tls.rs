@@ -16,7 +16,7 @@ use squall::topology::cluster::session::{
 use squall::topology::cluster::wire::{Control, Frame};
 
 fn free_endpoint() -> Endpoint {
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = common::free_port();
     Endpoint { protocol: Protocol::Tls, host: "127.0.0.1".into(), port }
 }
 

@@ -3,6 +3,8 @@
 //! when the process is killed.
 #![cfg(feature = "cluster")]
 
+mod common;
+
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -10,7 +12,7 @@ use squall::topology::cluster::config::{Endpoint, Protocol};
 use squall::topology::cluster::session::{SessionOptions, open, ping, watch_workers, worker_key};
 
 fn free_endpoint() -> Endpoint {
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = common::free_port();
     Endpoint { protocol: Protocol::Tcp, host: "127.0.0.1".into(), port }
 }
 

@@ -10,14 +10,12 @@ mod common;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
+use common::free_port;
+
 fn aces() -> std::path::PathBuf {
     let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.clf");
     assert!(log.exists(), "missing {}: this test plays the shared data's ACES log", log.display());
     log
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 /// `squall run` on the live SLAM topology, both link components on

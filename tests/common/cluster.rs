@@ -19,7 +19,7 @@ impl Workers {
         let mut children = Vec::new();
         let mut endpoints = Vec::new();
         for i in 0..n {
-            let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+            let port = super::free_port();
             let endpoint = format!("tcp/127.0.0.1:{port}");
             let log = std::fs::File::create(dir.path().join(format!("w{}.log", i + 1))).unwrap();
             let child = Command::new(env!("CARGO_BIN_EXE_squall"))
