@@ -8,16 +8,36 @@ mod common;
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
 
 use common::cluster::Workers;
+use common::finish_within;
 
+/// How long any one run may take before the test fails as hung: the
+/// longest (the whole ACES log) takes 12–20 s here.
+const HUNG: Duration = Duration::from_secs(240);
+
+/// `squall` with `args`, run in-process (no workers).
 fn squall(args: &[&str]) -> Output {
+    finish_within(start(args), HUNG, String::new)
+}
+
+/// `squall` with `args` as a cluster run on `workers`: a hung run fails
+/// with their logs.
+fn squall_on(workers: &Workers, args: &[&str]) -> Output {
+    finish_within(start(args), HUNG, || workers.logs())
+}
+
+/// `squall` with `args` started, stdout and stderr piped.
+fn start(args: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_squall"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(args)
-        .output()
-        .expect("squall runs")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("squall starts")
 }
 
 fn text(bytes: &[u8]) -> String {
@@ -62,7 +82,7 @@ fn wordcount_on_two_workers_counts_exactly_what_it_counts_in_process() {
         args.extend(sets);
         args.extend(["--out", out.to_str().unwrap()]);
         args.extend(extra);
-        squall(&args)
+        squall_on(&workers, &args)
     };
     let done = run(local.path(), &[]);
     assert!(done.status.success(), "{}", text(&done.stderr));
@@ -123,7 +143,7 @@ fn slam_with_three_matchers_on_three_workers_gives_the_in_process_run_byte_for_b
         // cross with them.
         args.extend(["--set", "matcher.params.old_map_age=3", "--out", out.to_str().unwrap()]);
         args.extend(extra);
-        squall(&args)
+        squall_on(&workers, &args)
     };
     let done = slam(alone.path(), &["--matchers", "1"]);
     assert!(done.status.success(), "{}", text(&done.stderr));
@@ -151,21 +171,24 @@ fn speedup_on_a_cluster_adds_worker_rows_with_their_traffic() {
     let cluster = workers.cluster_file("");
     let out = tempfile::tempdir().unwrap();
     let log = aces();
-    let done = squall(&[
-        "speedup",
-        "--log",
-        &log,
-        "--max-scans",
-        "200",
-        "--particles",
-        "10",
-        "--matchers",
-        "1,2",
-        "--out",
-        out.path().to_str().unwrap(),
-        "--cluster",
-        cluster.to_str().unwrap(),
-    ]);
+    let done = squall_on(
+        &workers,
+        &[
+            "speedup",
+            "--log",
+            &log,
+            "--max-scans",
+            "200",
+            "--particles",
+            "10",
+            "--matchers",
+            "1,2",
+            "--out",
+            out.path().to_str().unwrap(),
+            "--cluster",
+            cluster.to_str().unwrap(),
+        ],
+    );
     assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
     let csv = std::fs::read_to_string(out.path().join("speedup.csv")).unwrap();
     let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
@@ -189,22 +212,22 @@ fn probe_on(workers: &Workers, cluster: &Path, sets: &[&str]) -> serde_json::Val
         args.extend(["--set", set]);
     }
     args.extend(["--out", out.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()]);
-    let done = squall(&args);
+    let done = squall_on(workers, &args);
     assert!(done.status.success(), "{}\n{}", text(&done.stderr), workers.log(0));
     metrics(out.path())
 }
 
 /// `squall run` on the probe topology, 3000 probes at 1 kHz (3 s), on
 /// `cluster`, started in the background.
-fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> std::process::Child {
+fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> Child {
     Command::new(env!("CARGO_BIN_EXE_squall"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(["run", "examples/topologies/probe.toml", "--quiet"])
         .args(["--set", "source.params.count=3000", "--set", "source.params.rate_hz=1000"])
         .args(["--set", &format!("relay.parallelism={relays}")])
         .args(["--out", out.to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap()
 }
@@ -213,7 +236,7 @@ fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> std::process::Ch
 fn well_into_hosting(workers: &mut Workers, i: usize) {
     let log = workers.wait_for_log(i, "hosting run");
     assert!(log.contains("hosting run"), "worker {i} never hosted the run: {log}");
-    std::thread::sleep(std::time::Duration::from_millis(700));
+    std::thread::sleep(Duration::from_millis(700));
 }
 
 /// Kills worker i 0.7 s after it started hosting a run.
@@ -231,7 +254,7 @@ fn probe_run_losing_w2(placement: &str, relays: usize) -> (Workers, std::process
     let out = tempfile::tempdir().unwrap();
     let run = slow_probe_run(&cluster, out.path(), relays);
     kill_once_hosting(&mut workers, 1);
-    let done = run.wait_with_output().unwrap();
+    let done = finish_within(run, HUNG, || workers.logs());
     (workers, done, out)
 }
 
@@ -261,7 +284,7 @@ fn a_killed_coordinator_leaves_no_worker_running() {
     run.kill().unwrap();
     let _ = run.wait();
     let killed = std::time::Instant::now();
-    let deadline = killed + std::time::Duration::from_secs(5);
+    let deadline = killed + Duration::from_secs(5);
     let exited = loop {
         if let Some(status) = workers.children[0].try_wait().unwrap() {
             break Some(status);
@@ -269,7 +292,7 @@ fn a_killed_coordinator_leaves_no_worker_running() {
         if std::time::Instant::now() > deadline {
             break None;
         }
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::thread::sleep(Duration::from_millis(20));
     };
     assert!(
         exited.is_some(),
@@ -309,16 +332,16 @@ fn slam_goes_on_when_a_matcher_s_worker_is_lost_halfway_and_stays_as_accurate() 
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(["slam", "--log", &log, "--matchers", "3", "--particles", "30"])
         .args(["--out", broken.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     // The whole log takes 12–20 s here: lose the second worker about halfway.
     let log_of_w2 = workers.wait_for_log(1, "hosting run");
     assert!(log_of_w2.contains("hosting run"), "{log_of_w2}");
-    std::thread::sleep(std::time::Duration::from_secs(6));
+    std::thread::sleep(Duration::from_secs(6));
     workers.children[1].kill().unwrap();
-    let done = run.wait_with_output().unwrap();
+    let done = finish_within(run, HUNG, || workers.logs());
     let stderr = text(&done.stderr);
     assert!(done.status.success(), "{stderr}\n{}", workers.log(0));
     let m = metrics(broken.path());

@@ -10,7 +10,16 @@ mod common;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-use common::free_port;
+use common::{finish_within, free_port};
+
+/// How long a run or a robot may take before the test fails as hung.
+const HUNG: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// Runs `command` to its end (at most [`HUNG`]), capturing what it prints.
+fn output(command: &mut Command) -> std::process::Output {
+    let child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the command starts");
+    finish_within(child, HUNG, String::new)
+}
 
 fn aces() -> std::path::PathBuf {
     let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.clf");
@@ -50,14 +59,14 @@ fn round_trip(format: &str, scans: usize) -> (String, serde_json::Value) {
         "matcher.params.map_interval=2".to_string(),
     ];
     let run = start_live(&listen, &sets, out.path());
-    let robot = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .args(["robot", "--log"])
-        .arg(aces())
-        .args(["--connect", &endpoint, "--format", format, "--speed", "5", "--wait-secs", "3"])
-        .args(["--max-scans", &scans.to_string()])
-        .output()
-        .expect("squall robot runs");
-    let ran = run.wait_with_output().unwrap();
+    let robot = output(
+        Command::new(env!("CARGO_BIN_EXE_squall"))
+            .args(["robot", "--log"])
+            .arg(aces())
+            .args(["--connect", &endpoint, "--format", format, "--speed", "5", "--wait-secs", "3"])
+            .args(["--max-scans", &scans.to_string()]),
+    );
+    let ran = finish_within(run, HUNG, String::new);
     let report = String::from_utf8_lossy(&robot.stdout).to_string();
     assert!(robot.status.success(), "robot: {report}{}", String::from_utf8_lossy(&robot.stderr));
     assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
@@ -118,12 +127,8 @@ fn an_independent_ros_2_client_gets_poses_back() {
     let out = tempfile::tempdir().unwrap();
     let run = start_live(&listen, &["source.params.idle_secs=3.0".to_string()], out.path());
     let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/cdr_robot.py");
-    let robot = Command::new("python3")
-        .arg(client)
-        .args(["--connect", &endpoint, "--scans", "60"])
-        .output()
-        .expect("the Python client runs");
-    let ran = run.wait_with_output().unwrap();
+    let robot = output(Command::new("python3").arg(client).args(["--connect", &endpoint, "--scans", "60"]));
+    let ran = finish_within(run, HUNG, String::new);
     let stdout = String::from_utf8_lossy(&robot.stdout);
     assert!(robot.status.success(), "client: {stdout}{}", String::from_utf8_lossy(&robot.stderr));
     assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
@@ -163,15 +168,20 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
     ];
     let run = start_live(&listen, &sets, out.path());
     let robot = |name: &str, ca: &str, scans: &str, connect_secs: &str| {
-        Command::new(env!("CARGO_BIN_EXE_squall"))
-            .args(["robot", "--log"])
-            .arg(aces())
-            .args(["--connect", &endpoint, "--max-scans", scans, "--speed", "5"])
-            .args(["--connect-secs", connect_secs])
-            .args(["--tls-ca", &file(&format!("{ca}.pem"))])
-            .args(["--tls-cert", &file(&format!("{name}.pem")), "--tls-key", &file(&format!("{name}.key"))])
-            .output()
-            .unwrap()
+        output(
+            Command::new(env!("CARGO_BIN_EXE_squall"))
+                .args(["robot", "--log"])
+                .arg(aces())
+                .args(["--connect", &endpoint, "--max-scans", scans, "--speed", "5"])
+                .args(["--connect-secs", connect_secs])
+                .args(["--tls-ca", &file(&format!("{ca}.pem"))])
+                .args([
+                    "--tls-cert",
+                    &file(&format!("{name}.pem")),
+                    "--tls-key",
+                    &file(&format!("{name}.key")),
+                ]),
+        )
     };
     // A rogue that trusts the cluster's authority but holds another's
     // certificate gets no link. The topology outwaits it: its idle timer
@@ -186,7 +196,7 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
     let member = robot("robot", "ca", "60", "20");
     let report = String::from_utf8_lossy(&member.stdout).to_string();
     assert!(member.status.success(), "{report}{}", String::from_utf8_lossy(&member.stderr));
-    let ran = run.wait_with_output().unwrap();
+    let ran = finish_within(run, HUNG, String::new);
     assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();

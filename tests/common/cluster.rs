@@ -54,6 +54,11 @@ impl Workers {
         std::fs::read_to_string(self.dir.path().join(format!("w{}.log", i + 1))).unwrap_or_default()
     }
 
+    /// Every worker's log, each under its name: what a failed test shows.
+    pub(crate) fn logs(&self) -> String {
+        (0..self.children.len()).map(|i| format!("--- w{} ---\n{}", i + 1, self.log(i))).collect()
+    }
+
     /// Waits up to 10 s for worker i's log to contain `needle`; the log.
     pub(crate) fn wait_for_log(&self, i: usize, needle: &str) -> String {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);

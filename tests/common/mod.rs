@@ -19,3 +19,47 @@ pub(crate) fn free_port() -> u16 {
         }
     }
 }
+
+/// Waits for `child` (spawned with piped stdout and stderr) to end, for at
+/// most `limit`. A run that outlives it is killed and the test fails with
+/// what it printed and `context()` (the workers' logs, say): a hung run
+/// must fail the suite in minutes, not hold it until CI's limit.
+pub(crate) fn finish_within(
+    mut child: std::process::Child,
+    limit: std::time::Duration,
+    context: impl FnOnce() -> String,
+) -> std::process::Output {
+    use std::io::Read;
+    fn drain(pipe: Option<impl Read + Send + 'static>) -> std::thread::JoinHandle<Vec<u8>> {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            if let Some(mut pipe) = pipe {
+                let _ = pipe.read_to_end(&mut bytes);
+            }
+            bytes
+        })
+    }
+    let (stdout, stderr) = (drain(child.stdout.take()), drain(child.stderr.take()));
+    let deadline = std::time::Instant::now() + limit;
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("the child can be waited on") {
+            break Some(status);
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let (stdout, stderr) = (stdout.join().unwrap(), stderr.join().unwrap());
+    match status {
+        Some(status) => std::process::Output { status, stdout, stderr },
+        None => panic!(
+            "still running after {limit:?}, killed; it printed:\n{}\n{}\n{}",
+            String::from_utf8_lossy(&stdout),
+            String::from_utf8_lossy(&stderr),
+            context()
+        ),
+    }
+}

@@ -7,7 +7,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use zenoh::Session;
+use zenoh::Wait;
 use zenoh::liveliness::LivelinessToken;
+use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 
 use crate::cluster::config::{Endpoint, TlsSpec};
@@ -175,7 +177,11 @@ impl WorkerPresence {
                 match Frame::decode(&bytes, DEFAULT_MAX_FRAME) {
                     Ok(Frame::Control(Control::Ping { nonce })) => {
                         let pong = Frame::Control(Control::Pong { nonce, worker: name.clone() });
-                        if let Err(e) = answer.put(reply_key(&endpoint), pong.encode()).await {
+                        if let Err(e) = answer
+                            .put(reply_key(&endpoint), pong.encode())
+                            .congestion_control(CongestionControl::Block)
+                            .await
+                        {
                             tracing::warn!("worker {name}: cannot answer a ping: {e}");
                         }
                     }
@@ -270,6 +276,18 @@ async fn watch_coordinators(
     Ok(())
 }
 
+/// Sends a control frame on `key`, waiting for room on the link rather
+/// than dropping it. A put's default is to drop when the link's queue is
+/// full, which it is while tuples stream, and a lost `Finished`, `Totals`
+/// or `Go` would leave a run waiting forever.
+pub(crate) fn send_control(session: &Session, key: &str, control: Control) -> Result<(), String> {
+    session
+        .put(key, Frame::Control(control).encode())
+        .congestion_control(CongestionControl::Block)
+        .wait()
+        .map_err(|e| e.to_string())
+}
+
 /// Asks the worker at `endpoint` whether it is there; its name on success.
 pub async fn ping(session: &Session, endpoint: &Endpoint, timeout: Duration) -> Result<String, SessionError> {
     let replies = session.declare_subscriber(reply_key(endpoint)).await.map_err(zenoh_error)?;
@@ -278,7 +296,11 @@ pub async fn ping(session: &Session, endpoint: &Endpoint, timeout: Duration) -> 
     let deadline = tokio::time::Instant::now() + timeout;
     // The first puts may go out before the link is up: repeat until answered.
     loop {
-        session.put(control_key(endpoint), ping.clone()).await.map_err(zenoh_error)?;
+        session
+            .put(control_key(endpoint), ping.clone())
+            .congestion_control(CongestionControl::Block)
+            .await
+            .map_err(zenoh_error)?;
         let wait = (deadline - tokio::time::Instant::now()).min(Duration::from_millis(200));
         if let Ok(Ok(sample)) = tokio::time::timeout(wait, replies.recv_async()).await
             && let Ok(Frame::Control(Control::Pong { nonce: n, worker })) =
@@ -298,7 +320,11 @@ pub async fn ping(session: &Session, endpoint: &Endpoint, timeout: Duration) -> 
 
 /// Tells the worker at `endpoint` to stop.
 pub async fn stop(session: &Session, endpoint: &Endpoint) -> Result<(), SessionError> {
-    session.put(control_key(endpoint), Frame::Control(Control::Stop).encode()).await.map_err(zenoh_error)
+    session
+        .put(control_key(endpoint), Frame::Control(Control::Stop).encode())
+        .congestion_control(CongestionControl::Block)
+        .await
+        .map_err(zenoh_error)
 }
 
 /// Watches workers' liveliness: yields (worker key, alive) as tokens come

@@ -15,7 +15,7 @@ use zenoh::Wait;
 use crate::cluster::config::ClusterSpec;
 use crate::cluster::run::host::HostRun;
 use crate::cluster::run::layout::Layout;
-use crate::cluster::session::{self, SessionOptions, control_key, reply_key, worker_key};
+use crate::cluster::session::{self, SessionOptions, control_key, reply_key, send_control, worker_key};
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, EdgeTraffic, Frame, RunPlan, TaskEvent};
 use crate::metrics::{EdgeReport, RunReport, TaskOutcome};
 use crate::plan::Topology;
@@ -162,9 +162,9 @@ fn coordinate(
         HostRun::build(topology, layout.clone(), session, &run, (0, host_count), options).map_err(setup)?;
     start_workers(cluster, session, &plan)?;
     let control = plan(0).control_key();
-    put(session, &control, Control::Go).map_err(setup)?;
+    send_control(session, &control, Control::Go).map_err(setup)?;
     let started = Instant::now();
-    local.start(topology, options, &events_tx).map_err(|e| setup(format!("cannot start tasks: {e}")))?;
+    local.start(topology, options, &events_tx).map_err(setup)?;
     watch_for_lost_workers(io, session, cluster, events_tx.clone())?;
     let workers: Vec<u16> = (1..host_count as u16).collect();
     let mut hosts_view = ClusterHosts {
@@ -188,7 +188,7 @@ fn coordinate(
     let lost = std::mem::take(&mut hosts_view.lost);
     let mut warnings = std::mem::take(&mut hosts_view.warnings);
     drop(hosts_view);
-    put(session, &control, Control::Collect).map_err(setup)?;
+    send_control(session, &control, Control::Collect).map_err(setup)?;
     let mut outcomes: Vec<Vec<Option<TaskOutcome>>> =
         topology.components.iter().map(|c| vec![None; c.spec.parallelism]).collect();
     for (c, t, o) in local.join(failure.is_none()) {
@@ -291,10 +291,6 @@ fn refuse_acking_across_hosts(topology: &Topology, layout: &Layout) -> Result<()
     }
 }
 
-fn put(session: &Session, key: &str, control: Control) -> Result<(), String> {
-    session.put(key, Frame::Control(control).encode()).wait().map_err(|e| e.to_string())
-}
-
 /// Ships the plan to every worker and waits until each is wired.
 fn start_workers(
     cluster: &ClusterSpec,
@@ -305,7 +301,7 @@ fn start_workers(
     for (w, worker) in cluster.workers.iter().enumerate() {
         let subscriber = session.declare_subscriber(reply_key(&worker.endpoint)).wait().map_err(setup)?;
         let start = Control::Start(Box::new(plan(w as u16 + 1)));
-        put(session, &control_key(&worker.endpoint), start).map_err(setup)?;
+        send_control(session, &control_key(&worker.endpoint), start).map_err(setup)?;
         replies.push(subscriber);
     }
     let deadline = Instant::now() + READY;
@@ -388,7 +384,7 @@ impl Hosts for &mut ClusterHosts<'_> {
     fn advance(&mut self, component: usize, stage: Stage) {
         self.local.advance(component, stage);
         let advance = Control::Advance { component: component as u32, stage: stage as u8 };
-        if let Err(e) = put(self.session, &self.control, advance) {
+        if let Err(e) = send_control(self.session, &self.control, advance) {
             tracing::warn!("coordinator: cannot reach the workers: {e}");
         }
     }
@@ -399,7 +395,7 @@ impl Hosts for &mut ClusterHosts<'_> {
         self.add(&mut sum, local);
         let nonce = self.next_nonce;
         self.next_nonce += 1;
-        put(self.session, &self.control, Control::Status { nonce }).ok()?;
+        send_control(self.session, &self.control, Control::Status { nonce }).ok()?;
         let mut waiting = self.workers.clone();
         let deadline = Instant::now() + STATUS;
         while !waiting.is_empty() {
@@ -459,7 +455,8 @@ impl Hosts for &mut ClusterHosts<'_> {
         let moves: Vec<(usize, usize, u16)> =
             tasks.iter().enumerate().map(|(i, &(c, t))| (c, t, survivors[i % survivors.len()])).collect();
         let wire = moves.iter().map(|&(c, t, h)| (c as u32, t as u32, h)).collect();
-        put(self.session, &self.control, Control::Reassign { lost: host, moves: wire }).map_err(lost_at)?;
+        send_control(self.session, &self.control, Control::Reassign { lost: host, moves: wire })
+            .map_err(lost_at)?;
         self.local.reassign(self.topology, self.options, &self.events, &moves).map_err(|e| {
             lost_at(format!("failed: cannot start it again in the coordinator's process: {e}"))
         })?;

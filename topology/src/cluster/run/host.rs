@@ -7,6 +7,7 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc;
+use std::time::Duration;
 
 use zenoh::Session;
 use zenoh::Wait;
@@ -19,6 +20,10 @@ use crate::runtime::local::control::{Event, Stage};
 use crate::runtime::local::target::Target;
 use crate::runtime::local::wiring::{Hop, Wiring};
 use crate::runtime::local::{RunOptions, TaskThreads, io_runtime, join_tasks, spawn_tasks};
+
+/// How long a host waits, once told to go, for every other host's
+/// subscription to reach it.
+const HEARD: Duration = Duration::from_secs(10);
 
 /// Where task t of component c's tuples to each consumer go, from this
 /// host: a link target unless the consumer is here too.
@@ -86,18 +91,22 @@ impl HostRun {
         self.runtime.as_ref().expect("running until dropped").handle()
     }
 
-    /// Starts this host's tasks; they report on `events`.
+    /// Starts this host's tasks, once every host's subscription has reached
+    /// this one (at most `HEARD` after `Go`); they report on `events`.
     pub(crate) fn start(
         &mut self,
         topology: &Topology,
         options: &RunOptions,
         events: &mpsc::Sender<Event>,
-    ) -> std::io::Result<()> {
+    ) -> Result<(), String> {
+        let waited = self.link.wait_until_heard(HEARD)?;
+        tracing::debug!("host {}: heard every host after {:.1} ms", self.host, waited.as_secs_f64() * 1e3);
         let (layout, host) = (self.layout.clone(), self.host);
         let runtime = self.handle().clone();
         self.threads = spawn_tasks(topology, &mut self.wiring, options, &runtime, events, &|c, t| {
             layout.host(c, t) == host
-        })?;
+        })
+        .map_err(|e| format!("cannot start tasks: {e}"))?;
         Ok(())
     }
 

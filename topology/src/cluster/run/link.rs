@@ -126,6 +126,33 @@ impl Link {
         })
     }
 
+    /// Waits, at most `limit`, until every host's subscription for its
+    /// tuples has reached this process; how long that took. zenoh drops a
+    /// put that no known subscriber matches, and another worker's
+    /// subscription arrives only once the two workers have linked up (gossip
+    /// tells them of each other after the coordinator connects to both):
+    /// a tuple sent before that would be lost without a trace.
+    pub(crate) fn wait_until_heard(&self, limit: Duration) -> Result<Duration, String> {
+        let started = Instant::now();
+        for (host, publisher) in self.publishers.iter().enumerate() {
+            loop {
+                let heard = publisher.matching_status().wait().map_err(|e| e.to_string())?.matching();
+                if heard {
+                    break;
+                }
+                if started.elapsed() > limit {
+                    return Err(format!(
+                        "host {} never heard from host {host} within {} s: can the workers reach each other?",
+                        self.host,
+                        limit.as_secs()
+                    ));
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
+        Ok(started.elapsed())
+    }
+
     /// Tuples sent to and received from each host.
     pub(crate) fn counts(&self) -> (Vec<u64>, Vec<u64>) {
         let read = |v: &[AtomicU64]| v.iter().map(|c| c.load(Ordering::SeqCst)).collect();

@@ -11,6 +11,7 @@ use zenoh::Wait;
 
 use crate::cluster::run::host::HostRun;
 use crate::cluster::run::layout::Layout;
+use crate::cluster::session::send_control;
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan, TaskEvent};
 use crate::plan::Topology;
 use crate::registry::Registry;
@@ -33,10 +34,7 @@ pub struct Hosted {
 }
 
 fn put(session: &Session, key: &str, control: Control) -> Result<(), String> {
-    session
-        .put(key, Frame::Control(control).encode())
-        .wait()
-        .map_err(|e| format!("cannot reach the coordinator: {e}"))
+    send_control(session, key, control).map_err(|e| format!("cannot reach the coordinator: {e}"))
 }
 
 /// Hosts `plan` on this worker until the coordinator collects it; answers
@@ -98,7 +96,19 @@ pub fn host_run(
         }
     }
     let (events_tx, events) = mpsc::channel();
-    host.start(&topology, options, &events_tx).map_err(|e| format!("cannot start tasks: {e}"))?;
+    if let Err(e) = host.start(&topology, options, &events_tx) {
+        // Fail the run in the coordinator's eyes too (in a task of this
+        // host's), rather than leave it waiting for tasks that never start.
+        let layout = &host.layout;
+        let here = (0..layout.components())
+            .flat_map(|c| (0..layout.tasks(c)).map(move |t| (c, t)))
+            .find(|&(c, t)| layout.host(c, t) == plan.host);
+        if let Some((c, t)) = here {
+            let failed = TaskEvent::Failed(e.clone());
+            put(session, &report_key, Control::Event { component: c as u32, task: t as u32, event: failed })?;
+        }
+        return Err(e);
+    }
     let mut aborted = false;
     loop {
         while let Ok(Event { component, task, kind }) = events.try_recv() {
