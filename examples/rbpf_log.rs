@@ -10,6 +10,8 @@
 //! processed scans composed with odometry in between (how GMapping results
 //! are usually scored).
 
+use std::io::Write;
+
 use anyhow::Context;
 use squall::bolts::eval::{relations, trajectory::Trajectory};
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
@@ -40,13 +42,17 @@ fn main() -> anyhow::Result<()> {
         last.push(stamp, pose);
     }
     let relations = relations::read_relations(rel.as_ref())?;
-    println!("{} scans, {processed} processed, {ms:.1} ms per processed scan", scans.len());
+    // Written, not printed: a closed pipe (`| head`) ends the example with
+    // an error rather than a panic.
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{} scans, {processed} processed, {ms:.1} ms per processed scan", scans.len())?;
     for (name, t) in [("online best estimate", &online), ("final best lineage", &last)] {
         let s = relations::score(t, &relations);
-        println!(
+        writeln!(
+            out,
             "{name}: {}/{} relations, {:.4} ± {:.4} m, {:.3} ± {:.3} deg",
             s.matched, s.total, s.trans_mean, s.trans_std, s.rot_mean_deg, s.rot_std_deg
-        );
+        )?;
     }
     Ok(())
 }
