@@ -228,17 +228,31 @@ impl Resampler {
         }
         out.count("particles_lost", lost);
         tracing::warn!("pf.resampler: matcher task {task} was lost; {lost} particles are gone");
-        let in_progress = self.gathered.tasks_heard > 0 || self.deciding.is_some();
-        if in_progress {
-            if self.gathered.heard_from.len() != tasks {
-                self.gathered.heard_from = vec![false; tasks];
-            }
-            self.stand_in();
-            if self.gathered.tasks_heard == tasks {
-                self.complete(out).await?;
-            }
+        if self.count_lost_as_heard(tasks) {
+            self.complete(out).await?;
         }
         Ok(())
+    }
+
+    /// After a loss, while a reading is being gathered or updated after a
+    /// decision: the lost tasks count as heard for it. `true` if that
+    /// completes it.
+    fn count_lost_as_heard(&mut self, tasks: usize) -> bool {
+        let in_progress = self.gathered.tasks_heard > 0 || self.deciding.is_some();
+        if !in_progress {
+            return false;
+        }
+        if self.gathered.tasks_heard == 0
+            && let Some((step, _, _)) = &self.deciding
+        {
+            // No update heard yet: the stand-ins are for the decided step.
+            self.gathered.step = *step;
+        }
+        if self.gathered.heard_from.len() != tasks {
+            self.gathered.heard_from = vec![false; tasks];
+        }
+        self.stand_in();
+        self.gathered.tasks_heard == tasks
     }
 
     /// Every task has been heard for the current reading: decide, or let
@@ -497,5 +511,47 @@ impl Bolt for Resampler {
             out.emit("trajectory", PoseStamped { stamp, pose }).await?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A resampler of `tasks` matcher tasks that has decided for `step`
+    /// and heard no update yet.
+    fn deciding(step: u64, tasks: usize) -> Resampler {
+        Resampler {
+            seed: 0,
+            tasks: Some(tasks),
+            population: None,
+            settings: None,
+            task_of: Vec::new(),
+            marks: Vec::new(),
+            gathered: Gathered::default(),
+            modes: (3, 0.5, 0.5),
+            standing_in: vec![false; tasks],
+            empty: vec![false; tasks],
+            dead: Vec::new(),
+            deciding: Some((step, Vec::new(), Vec::new())),
+            done: None,
+            replaced: vec![false; tasks],
+        }
+    }
+
+    #[test]
+    fn a_task_lost_between_a_decision_and_the_first_update_stands_in_for_that_step() {
+        let mut r = deciding(4034, 3);
+        r.standing_in[1] = true;
+        assert!(!r.count_lost_as_heard(3));
+        // The others' updates for the decided step complete it.
+        assert!(!r.heard(4034, 0, 3).unwrap());
+        assert!(r.heard(4034, 2, 3).unwrap());
+        // A report for another step while gathering is still refused.
+        let mut r = deciding(7, 3);
+        r.standing_in[0] = true;
+        r.count_lost_as_heard(3);
+        let wrong = r.heard(8, 1, 3).unwrap_err().to_string();
+        assert!(wrong.contains("a report for reading 8 while gathering 7"), "{wrong}");
     }
 }
