@@ -12,7 +12,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 use common::cluster::Workers;
-use common::finish_within;
+use common::{finish_within, output_within};
 
 /// How long any one run may take before the test fails as hung: the
 /// longest (the whole ACES log) takes 12–20 s here.
@@ -20,24 +20,20 @@ const HUNG: Duration = Duration::from_secs(240);
 
 /// `squall` with `args`, run in-process (no workers).
 fn squall(args: &[&str]) -> Output {
-    finish_within(start(args), HUNG, String::new)
+    output_within(&mut command(args), HUNG, String::new)
 }
 
 /// `squall` with `args` as a cluster run on `workers`: a hung run fails
 /// with their logs.
 fn squall_on(workers: &Workers, args: &[&str]) -> Output {
-    finish_within(start(args), HUNG, || workers.logs())
+    output_within(&mut command(args), HUNG, || workers.logs())
 }
 
-/// `squall` with `args` started, stdout and stderr piped.
-fn start(args: &[&str]) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_squall"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("squall starts")
+/// `squall` with `args`, in the repository.
+fn command(args: &[&str]) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_squall"));
+    command.current_dir(env!("CARGO_MANIFEST_DIR")).args(args);
+    command
 }
 
 fn text(bytes: &[u8]) -> String {
@@ -220,9 +216,7 @@ fn probe_on(workers: &Workers, cluster: &Path, sets: &[&str]) -> serde_json::Val
 /// `squall run` on the probe topology, 3000 probes at 1 kHz (3 s), on
 /// `cluster`, started in the background.
 fn slow_probe_run(cluster: &Path, out: &Path, relays: usize) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_squall"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["run", "examples/topologies/probe.toml", "--quiet"])
+    command(&["run", "examples/topologies/probe.toml", "--quiet"])
         .args(["--set", "source.params.count=3000", "--set", "source.params.rate_hz=1000"])
         .args(["--set", &format!("relay.parallelism={relays}")])
         .args(["--out", out.to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
@@ -328,9 +322,7 @@ fn slam_goes_on_when_a_matcher_s_worker_is_lost_halfway_and_keeps_its_track() {
     let done =
         squall(&["slam", "--log", &log, "--particles", "30", "--out", unbroken.path().to_str().unwrap()]);
     assert!(done.status.success(), "{}", text(&done.stderr));
-    let run = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["slam", "--log", &log, "--matchers", "3", "--particles", "30"])
+    let run = command(&["slam", "--log", &log, "--matchers", "3", "--particles", "30"])
         .args(["--out", broken.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())

@@ -10,15 +10,14 @@ mod common;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-use common::{finish_within, free_port};
+use common::{finish_within, free_port, output_within};
 
 /// How long a run or a robot may take before the test fails as hung.
 const HUNG: std::time::Duration = std::time::Duration::from_secs(120);
 
 /// Runs `command` to its end (at most [`HUNG`]), capturing what it prints.
 fn output(command: &mut Command) -> std::process::Output {
-    let child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the command starts");
-    finish_within(child, HUNG, String::new)
+    output_within(command, HUNG, String::new)
 }
 
 fn aces() -> std::path::PathBuf {

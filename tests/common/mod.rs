@@ -63,3 +63,15 @@ pub(crate) fn finish_within(
         ),
     }
 }
+
+/// Runs `command` to its end with stdout and stderr captured, at most
+/// `limit` (see [`finish_within`]).
+pub(crate) fn output_within(
+    command: &mut std::process::Command,
+    limit: std::time::Duration,
+    context: impl FnOnce() -> String,
+) -> std::process::Output {
+    use std::process::Stdio;
+    let child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the command starts");
+    finish_within(child, limit, context)
+}

@@ -374,8 +374,7 @@ impl BeamCache {
         for d in run {
             let c = ((base.0 + d.fixed.0) >> FIXED_BITS, (base.1 + d.fixed.1) >> FIXED_BITS);
             let hit = ((laser.x + d.dx) as f32, (laser.y + d.dy) as f32);
-            let key =
-                if SHORT { Some(u64::from(c.0 as u32) | (u64::from(c.1 as u32) << 32)) } else { cell_key(c) };
+            let key = if SHORT { Some(packed_cell(c)) } else { cell_key(c) };
             let best = match key {
                 Some(key) => {
                     let index = slot_index(key, d.back_code);
@@ -400,8 +399,14 @@ impl BeamCache {
 /// (thousands of kilometres), which are not cached.
 #[inline(always)]
 fn cell_key(c: (i64, i64)) -> Option<u64> {
-    let (Ok(x), Ok(y)) = (i32::try_from(c.0), i32::try_from(c.1)) else { return None };
-    Some(u64::from(x as u32) | (u64::from(y as u32) << 32))
+    let fits = i32::try_from(c.0).is_ok() && i32::try_from(c.1).is_ok();
+    fits.then(|| packed_cell(c))
+}
+
+/// The cache's key of a cell known to fit an `i32` each way.
+#[inline(always)]
+fn packed_cell(c: (i64, i64)) -> u64 {
+    u64::from(c.0 as u32) | (u64::from(c.1 as u32) << 32)
 }
 
 /// The table slot of the cell packed as `key`, seen with step back
