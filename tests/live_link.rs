@@ -101,6 +101,9 @@ fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
         assert_eq!(poses + dropped, scans, "{format}: {report} (dropped {dropped})");
         assert_eq!(without, dropped, "{format}: {report}");
         assert!(poses * 10 >= scans * 9, "{format}: only {poses} poses: {report}");
+        // Every pose sent arrived, and none went unheard: the robot listened.
+        assert_eq!(custom(&metrics, "publish", "poses_sent") as usize, poses, "{format}: {report}");
+        assert_eq!(custom(&metrics, "publish", "poses_unheard"), 0, "{format}: {report}");
         assert!(report.contains("round trip ms: p50"), "{report}");
         // The best particle's map came back while the robot was driving.
         let maps = report.lines().find_map(|l| l.strip_prefix("maps received: ")).unwrap();
@@ -111,10 +114,11 @@ fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
     }
 }
 
-#[test]
-fn an_independent_ros_2_client_gets_poses_back() {
-    // The client: the eclipse-zenoh Python package, CDR encoded with
-    // Python's struct (`.ci/run` installs the package).
+/// Runs the live topology and the independent Python client (the
+/// eclipse-zenoh package, CDR encoded with Python's struct; `.ci/run`
+/// installs the package) with `args`; returns the client's report and the
+/// run's metrics.
+fn python_round_trip(args: &[&str]) -> (serde_json::Value, serde_json::Value) {
     let check = Command::new("python3").args(["-c", "import zenoh"]).output();
     assert!(
         check.as_ref().is_ok_and(|o| o.status.success()),
@@ -126,7 +130,7 @@ fn an_independent_ros_2_client_gets_poses_back() {
     let out = tempfile::tempdir().unwrap();
     let run = start_live(&listen, &["source.params.idle_secs=3.0".to_string()], out.path());
     let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/cdr_robot.py");
-    let robot = output(Command::new("python3").arg(client).args(["--connect", &endpoint, "--scans", "60"]));
+    let robot = output(Command::new("python3").arg(client).args(["--connect", &endpoint]).args(args));
     let ran = finish_within(run, HUNG, String::new);
     let stdout = String::from_utf8_lossy(&robot.stdout);
     assert!(robot.status.success(), "client: {stdout}{}", String::from_utf8_lossy(&robot.stderr));
@@ -134,6 +138,12 @@ fn an_independent_ros_2_client_gets_poses_back() {
     let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    (report, metrics)
+}
+
+#[test]
+fn an_independent_ros_2_client_gets_poses_back() {
+    let (report, metrics) = python_round_trip(&["--scans", "60"]);
     let poses = report["poses_received"].as_u64().unwrap();
     let dropped = custom(&metrics, "dispatcher", "dropped_readings");
     assert_eq!(custom(&metrics, "source", "scans_received"), 60, "{report}");
@@ -143,6 +153,17 @@ fn an_independent_ros_2_client_gets_poses_back() {
     let last = report["last_pose"].as_array().unwrap();
     let (x, y) = (last[1].as_f64().unwrap(), last[2].as_f64().unwrap());
     assert!((x - 2.95).abs() < 0.1 && y.abs() < 0.05, "{report}");
+}
+
+#[test]
+fn poses_no_robot_listens_for_are_counted_as_unheard_not_sent() {
+    let (report, metrics) = python_round_trip(&["--scans", "40", "--ignore-poses"]);
+    assert_eq!(report["poses_received"].as_u64(), Some(0), "{report}");
+    let dropped = custom(&metrics, "dispatcher", "dropped_readings");
+    assert_eq!(custom(&metrics, "source", "scans_received"), 40, "{report}");
+    // A pose for every reading taken, none of them claimed as sent.
+    assert_eq!(custom(&metrics, "publish", "poses_unheard") + dropped, 40, "{metrics}");
+    assert_eq!(custom(&metrics, "publish", "poses_sent"), 0, "{metrics}");
 }
 
 #[test]

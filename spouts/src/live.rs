@@ -283,7 +283,10 @@ struct PublishParams {
 /// `live.publish`: every `PoseStamped` it receives goes to the robot on
 /// `pose_key`; `OccupancyGrid`s (the best particle's map) on `map_key`, at
 /// most every `map_interval_secs` (those in between are skipped and
-/// counted). Metrics: `poses_sent`, `maps_sent`, `maps_skipped`,
+/// counted). A message waits for room on a busy link rather than being
+/// dropped; one that no subscriber would receive (no robot listening on
+/// its key) is not sent and is counted instead. Metrics: `poses_sent`,
+/// `poses_unheard`, `maps_sent`, `maps_unheard`, `maps_skipped`,
 /// `map_bytes`.
 #[derive(Debug)]
 pub struct LivePublish {
@@ -293,7 +296,28 @@ pub struct LivePublish {
     map_interval: Duration,
     last_map: Option<std::time::Instant>,
     frame_id: String,
-    session: Option<zenoh::Session>,
+    /// The pose and map publishers, once prepared.
+    publishers: Option<(Publisher, Publisher)>,
+}
+
+type Publisher = zenoh::pubsub::Publisher<'static>;
+
+/// Sends `bytes` on `publisher` if anyone subscribes to its key, and
+/// counts it as `sent` or, with no subscriber (zenoh would drop it without
+/// a word), as `unheard`; whether it was sent.
+async fn send_counted(
+    publisher: &Publisher,
+    bytes: Vec<u8>,
+    out: &mut Emitter,
+    (sent, unheard): (&str, &str),
+) -> Result<bool, BoxError> {
+    if !publisher.matching_status().await?.matching() {
+        out.count(unheard, 1);
+        return Ok(false);
+    }
+    publisher.put(bytes).await?;
+    out.count(sent, 1);
+    Ok(true)
 }
 
 impl LivePublish {
@@ -310,7 +334,7 @@ impl LivePublish {
             map_interval: Duration::from_secs_f64(params.map_interval_secs),
             last_map: None,
             frame_id: params.frame_id,
-            session: None,
+            publishers: None,
         })
     }
 }
@@ -321,19 +345,22 @@ impl Bolt for LivePublish {
     }
 
     async fn prepare(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
-        self.session = Some(shared(&self.options).await?);
+        let session = shared(&self.options).await?;
+        let declare = |key: &String| {
+            session.declare_publisher(key.clone()).congestion_control(zenoh::qos::CongestionControl::Block)
+        };
+        self.publishers = Some((declare(&self.keys.0).await?, declare(&self.keys.1).await?));
         Ok(())
     }
 
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
-        let session = self.session.as_ref().ok_or("live.publish: not prepared")?;
+        let (poses, maps) = self.publishers.as_ref().ok_or("live.publish: not prepared")?;
         if let Some(pose) = input.get::<PoseStamped>() {
             let bytes = match self.format {
                 Format::Cdr => messages::pose_stamped(pose.stamp, &self.frame_id, &pose.pose),
                 Format::Squall => postcard::to_stdvec(pose)?,
             };
-            session.put(self.keys.0.clone(), bytes).await?;
-            out.count("poses_sent", 1);
+            send_counted(poses, bytes, out, ("poses_sent", "poses_unheard")).await?;
             return Ok(());
         }
         let map = input.get::<OccupancyGrid>().ok_or("live.publish takes PoseStamped and OccupancyGrid")?;
@@ -359,9 +386,10 @@ impl Bolt for LivePublish {
             .ok_or("live.publish: a map whose cells do not fill width × height")?,
             Format::Squall => postcard::to_stdvec(map)?,
         };
-        out.count("map_bytes", bytes.len() as u64);
-        session.put(self.keys.1.clone(), bytes).await?;
-        out.count("maps_sent", 1);
+        let length = bytes.len() as u64;
+        if send_counted(maps, bytes, out, ("maps_sent", "maps_unheard")).await? {
+            out.count("map_bytes", length);
+        }
         Ok(())
     }
 }

@@ -100,6 +100,7 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("--connect", required=True)
     p.add_argument("--scans", type=int, default=60)
+    p.add_argument("--ignore-poses", action="store_true", help="do not subscribe to the poses")
     args = p.parse_args()
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
@@ -107,7 +108,10 @@ def main():
     config.insert_json5("scouting/multicast/enabled", "false")
     poses = []
     with zenoh.open(config) as session:
-        session.declare_subscriber("robot/pose", lambda s: poses.append(read_pose_stamped(bytes(s.payload.to_bytes()))))
+        if not args.ignore_poses:
+            session.declare_subscriber(
+                "robot/pose", lambda s: poses.append(read_pose_stamped(bytes(s.payload.to_bytes())))
+            )
         scan_publisher = session.declare_publisher("robot/scan")
         odom_publisher = session.declare_publisher("robot/odom")
         # Drive once the topology subscribes to the scans.
@@ -124,7 +128,7 @@ def main():
             scan_publisher.put(laser_scan(stamp, corridor_ranges(0.0), -math.pi / 2, math.pi / 180))
             time.sleep(0.1)
         deadline = time.time() + 5
-        while len(poses) < args.scans and time.time() < deadline:
+        while not args.ignore_poses and len(poses) < args.scans and time.time() < deadline:
             time.sleep(0.05)
     last = poses[-1] if poses else None
     print(json.dumps({"scans_sent": args.scans, "poses_received": len(poses), "last_pose": last}))
