@@ -177,11 +177,7 @@ impl WorkerPresence {
                 match Frame::decode(&bytes, DEFAULT_MAX_FRAME) {
                     Ok(Frame::Control(Control::Ping { nonce })) => {
                         let pong = Frame::Control(Control::Pong { nonce, worker: name.clone() });
-                        if let Err(e) = answer
-                            .put(reply_key(&endpoint), pong.encode())
-                            .congestion_control(CongestionControl::Block)
-                            .await
-                        {
+                        if let Err(e) = put_waiting(&answer, reply_key(&endpoint), pong.encode()).await {
                             tracing::warn!("worker {name}: cannot answer a ping: {e}");
                         }
                     }
@@ -281,11 +277,17 @@ async fn watch_coordinators(
 /// full, which it is while tuples stream, and a lost `Finished`, `Totals`
 /// or `Go` would leave a run waiting forever.
 pub(crate) fn send_control(session: &Session, key: &str, control: Control) -> Result<(), String> {
-    session
-        .put(key, Frame::Control(control).encode())
-        .congestion_control(CongestionControl::Block)
-        .wait()
-        .map_err(|e| e.to_string())
+    put_waiting(session, key.to_string(), Frame::Control(control).encode()).wait().map_err(|e| e.to_string())
+}
+
+/// A put of `bytes` on `key` that waits for room on the link instead of
+/// being dropped (a put's default): for the frames a run cannot lose.
+fn put_waiting(
+    session: &Session,
+    key: String,
+    bytes: Vec<u8>,
+) -> impl zenoh::Resolve<zenoh::Result<()>> + '_ {
+    session.put(key, bytes).congestion_control(CongestionControl::Block)
 }
 
 /// Asks the worker at `endpoint` whether it is there; its name on success.
@@ -296,11 +298,7 @@ pub async fn ping(session: &Session, endpoint: &Endpoint, timeout: Duration) -> 
     let deadline = tokio::time::Instant::now() + timeout;
     // The first puts may go out before the link is up: repeat until answered.
     loop {
-        session
-            .put(control_key(endpoint), ping.clone())
-            .congestion_control(CongestionControl::Block)
-            .await
-            .map_err(zenoh_error)?;
+        put_waiting(session, control_key(endpoint), ping.clone()).await.map_err(zenoh_error)?;
         let wait = (deadline - tokio::time::Instant::now()).min(Duration::from_millis(200));
         if let Ok(Ok(sample)) = tokio::time::timeout(wait, replies.recv_async()).await
             && let Ok(Frame::Control(Control::Pong { nonce: n, worker })) =
@@ -320,9 +318,7 @@ pub async fn ping(session: &Session, endpoint: &Endpoint, timeout: Duration) -> 
 
 /// Tells the worker at `endpoint` to stop.
 pub async fn stop(session: &Session, endpoint: &Endpoint) -> Result<(), SessionError> {
-    session
-        .put(control_key(endpoint), Frame::Control(Control::Stop).encode())
-        .congestion_control(CongestionControl::Block)
+    put_waiting(session, control_key(endpoint), Frame::Control(Control::Stop).encode())
         .await
         .map_err(zenoh_error)
 }
