@@ -135,9 +135,16 @@ fn slam_with_three_matchers_on_three_workers_gives_the_in_process_run_byte_for_b
     let slam = |out: &Path, extra: &[&str]| {
         let log = aces();
         let mut args = vec!["slam", "--log", log.as_str(), "--max-scans", "300"];
-        // Snapshots for the old-map search every 3 readings: particles
-        // cross with them.
-        args.extend(["--set", "matcher.params.old_map_age=3", "--out", out.to_str().unwrap()]);
+        // Snapshots for the old-map search every 3 readings, and
+        // resampling whenever Neff is below 90%: particles cross often,
+        // and with their snapshots.
+        args.extend([
+            "--set",
+            "matcher.params.old_map_age=3",
+            "--set",
+            "matcher.params.resample_threshold=0.9",
+        ]);
+        args.extend(["--out", out.to_str().unwrap()]);
         args.extend(extra);
         squall_on(&workers, &args)
     };
