@@ -359,7 +359,7 @@ fn slam_goes_on_when_a_matcher_s_worker_is_lost_halfway_and_keeps_its_track() {
     );
     // After the loss the run is another draw of the filter (the moment of
     // the loss depends on the machine's load): 0.0698 m against 0.0447 m
-    // was seen once under load. A filter that lost track is off by tenths
+    // was seen once under load (with every beam matched, lskip 0). A filter that lost track is off by tenths
     // of a metre or more.
     assert!(survived <= 1.75 * whole, "{survived:.4} m after the loss against {whole:.4} m unbroken");
 }

@@ -287,12 +287,34 @@ impl BeamCache {
         let Some(key) = cell_key(c) else {
             return uncached_nearest(grid, c, hit, back, k);
         };
-        let index = slot_index(key, back_code);
-        if !self.holds(index, key, (self.generation << 4) | back_code) {
-            self.fill(index, grid, c, key, back, k);
-        }
-        let best = self.distance(index, hit);
+        let best = self.cached_distance(grid, c, key, hit, (back, back_code), k, &mut (self.generation << 4));
         (best < f32::INFINITY).then_some(Real::from(best))
+    }
+
+    /// The least squared distance from `hit` to the candidates of cell `c`
+    /// (packed: `key`) seen with step back `back` (and its code), from the
+    /// table, filling the cell's slot first if it does not hold it.
+    /// `generation` is the current generation shifted into a tag, kept by
+    /// the caller across a run of beams; a fill that empties the table
+    /// renews it.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn cached_distance(
+        &mut self,
+        grid: &TiledGrid,
+        c: (i64, i64),
+        key: u64,
+        hit: (f32, f32),
+        (back, back_code): ((i64, i64), u32),
+        k: i64,
+        generation: &mut u32,
+    ) -> f32 {
+        let index = slot_index(key, back_code);
+        if !self.holds(index, key, *generation | back_code) {
+            self.fill(index, grid, c, key, back, k);
+            *generation = self.generation << 4;
+        }
+        self.distance(index, hit)
     }
 
     /// Whether slot `index` holds the cell `key` with `tag` (the current
@@ -377,12 +399,7 @@ impl BeamCache {
             let key = if SHORT { Some(packed_cell(c)) } else { cell_key(c) };
             let best = match key {
                 Some(key) => {
-                    let index = slot_index(key, d.back_code);
-                    if !self.holds(index, key, generation | d.back_code) {
-                        self.fill(index, grid, c, key, d.back, k);
-                        generation = self.generation << 4;
-                    }
-                    self.distance(index, hit)
+                    self.cached_distance(grid, c, key, hit, (d.back, d.back_code), k, &mut generation)
                 }
                 None => uncached_nearest(grid, c, hit, d.back, k).map_or(f32::INFINITY, |d2| d2 as f32),
             };
