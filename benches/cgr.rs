@@ -11,10 +11,10 @@ use std::time::Instant;
 use squall::bolts::cgr::model::{CgrModel, Init, LocalizeOptions};
 use squall::bolts::cgr::observation::Observation2d;
 use squall::bolts::cgr::scene_grid::SceneGrid;
-use squall::bolts::geometry::{Pose2, Real};
-use squall::bolts::linemap::LineMap;
 use squall::bolts::pf::Filter;
-use squall::bolts::sensor::LaserReading;
+use squall::core::geometry::{Pose2, Real};
+use squall::core::linemap::LineMap;
+use squall::core::sensor::LaserReading;
 
 /// A perfect 180-beam scan from `pose`, odometry `pose`.
 fn scan(map: &LineMap, pose: &Pose2, stamp: f64) -> Observation2d {

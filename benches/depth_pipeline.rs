@@ -10,12 +10,12 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use squall::bolts::cgr::depth_sim::{DepthCamera, Props};
 use squall::bolts::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
 use squall::bolts::cgr::model::{CgrModel, Init, LocalizeOptions};
 use squall::bolts::cgr::observation::Observation2d;
 use squall::bolts::cgr::scene_grid::SceneGrid;
 use squall::bolts::pf::Filter;
+use squall::core::depth_render::{DepthCamera, Props};
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation, floor_for};
 
 fn main() {

@@ -8,7 +8,8 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use squall::bolts::cgr::fspf::{DepthImage, FspfOptions, Intrinsics, PlaneFilter, PlaneFiltered};
+use squall::bolts::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
+use squall::core::camera::{DepthImage, Intrinsics};
 
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is accepted.

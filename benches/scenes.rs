@@ -6,9 +6,9 @@
 use std::path::Path;
 use std::time::Instant;
 
-use squall::bolts::cgr::scene::observable_scene;
 use squall::bolts::cgr::scene_grid::SceneGrid;
-use squall::bolts::linemap::LineMap;
+use squall::core::linemap::LineMap;
+use squall::core::visibility::observable_scene;
 
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is accepted.

@@ -14,9 +14,9 @@
 use std::path::Path;
 use std::time::Instant;
 
-use squall::bolts::sensor::LaserReading;
 use squall::bolts::slam::filter::Rbpf;
 use squall::bolts::slam::options::{Cutoff, SlamOptions};
+use squall::core::sensor::LaserReading;
 use squall::spouts::carmen::{ReadOptions, read_front_scans};
 use squall::spouts::sim::office::office;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};

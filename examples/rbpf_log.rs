@@ -13,8 +13,9 @@
 use std::io::Write;
 
 use anyhow::Context;
-use squall::bolts::eval::{relations, trajectory::Trajectory};
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
+use squall::core::eval::relations;
+use squall::core::trajectory::Trajectory;
 use squall::spouts::carmen::{ReadOptions, read_front_scans};
 
 fn main() -> anyhow::Result<()> {

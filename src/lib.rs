@@ -8,5 +8,6 @@
 pub mod builtin;
 
 pub use squall_bolts as bolts;
+pub use squall_core as core;
 pub use squall_spouts as spouts;
 pub use squall_topology as topology;

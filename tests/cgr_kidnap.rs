@@ -7,9 +7,9 @@ use std::sync::Arc;
 use squall::bolts::cgr::model::{CgrModel, Init, LocalizeOptions};
 use squall::bolts::cgr::observation::Observation2d;
 use squall::bolts::cgr::scene_grid::SceneGrid;
-use squall::bolts::geometry::Pose2;
 use squall::bolts::pf::Filter;
 use squall::bolts::pf::model::Injection;
+use squall::core::geometry::Pose2;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation, floor_for};
 
 /// Scans per second of the simulated laser.

@@ -7,8 +7,8 @@ use std::sync::Arc;
 use squall::bolts::cgr::model::{CgrModel, Init, LocalizeOptions};
 use squall::bolts::cgr::observation::Observation2d;
 use squall::bolts::cgr::scene_grid::SceneGrid;
-use squall::bolts::geometry::Pose2;
 use squall::bolts::pf::Filter;
+use squall::core::geometry::Pose2;
 use squall::spouts::sim::office::office;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};
 
@@ -36,7 +36,7 @@ fn track(shards: usize) -> (f64, f64, f64, Vec<Pose2>) {
         let e = p.distance(truth);
         sum += e;
         max = max.max(e);
-        heading += squall::bolts::geometry::normalize_angle(p.theta - truth.theta).abs();
+        heading += squall::core::geometry::normalize_angle(p.theta - truth.theta).abs();
         n += 1.0;
         poses.push(p);
     }

@@ -249,7 +249,7 @@ fn eval_round_trips_a_tum_trajectory_and_reports_bad_files() {
     // The odometry of the CSAIL log as TUM scores the same as the log itself.
     let clf = shared_data("laser/mit-csail.clf");
     let records = squall::spouts::carmen::read_log(Path::new(&clf), Default::default()).unwrap();
-    let mut t = squall::bolts::eval::trajectory::Trajectory::default();
+    let mut t = squall::core::trajectory::Trajectory::default();
     for r in records {
         if let squall::spouts::carmen::Record::Scan(_, s) = r {
             t.push(s.stamp, s.odometry);

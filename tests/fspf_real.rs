@@ -8,7 +8,8 @@ use std::path::Path;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use squall::bolts::cgr::fspf::{DepthImage, FspfOptions, Intrinsics, PlaneFilter, PlaneFiltered};
+use squall::bolts::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
+use squall::core::camera::{DepthImage, Intrinsics};
 
 /// Fraction of the valid pixels within `radius` px of `p` that lie within
 /// 2 cm of the plane through `p` with normal `n`.

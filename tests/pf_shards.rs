@@ -5,10 +5,10 @@
 
 use std::path::Path;
 
-use squall::bolts::geometry::Pose2;
-use squall::bolts::map::OccupancyGrid;
-use squall::bolts::sensor::LaserReading;
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
+use squall::core::geometry::Pose2;
+use squall::core::occupancy::OccupancyGrid;
+use squall::core::sensor::LaserReading;
 use squall::spouts::carmen::{ReadOptions, read_front_scans};
 use squall::spouts::sim::office::office;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};

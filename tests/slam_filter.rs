@@ -1,8 +1,9 @@
 //! The serial RBPF on a simulated run: its trajectory must be closer to the
 //! ground truth than the raw odometry it started from.
 
-use squall::bolts::eval::{ground_truth, trajectory::Trajectory};
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
+use squall::core::eval::ground_truth;
+use squall::core::trajectory::Trajectory;
 use squall::spouts::sim::office::office;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};
 
@@ -40,7 +41,7 @@ fn slam_beats_odometry_on_a_simulated_office() {
 /// best trajectory, which they cannot if the loop was not closed.
 #[test]
 fn a_simulated_run_closes_its_loops() {
-    use squall::bolts::eval::relations::{parse_relations, score};
+    use squall::core::eval::relations::{parse_relations, score};
     use squall::spouts::sim::output::relations;
 
     let config = SimConfig { seed: 5, duration_secs: 300.0, ..SimConfig::default() };

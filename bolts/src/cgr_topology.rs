@@ -14,19 +14,20 @@ use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tup
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::cgr::depth_sim::{DepthCamera, DepthFrame};
 use crate::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
 use crate::cgr::measurement::CgrOptions;
 use crate::cgr::model::{CgrModel, Init, LocalizeOptions};
-use crate::cgr::observation::{CameraMount, Observation2d};
+use crate::cgr::observation::Observation2d;
 use crate::cgr::scene_grid::SceneGrid;
-use crate::geometry::{Pose2, Real};
-use crate::linemap::LineMap;
 use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::pf_topology::from_table;
-use crate::sensor::LaserReading;
-use crate::slam::motion::MotionNoise;
+use squall_core::camera::{CameraMount, DepthFrame};
+use squall_core::depth_render::DepthCamera;
+use squall_core::geometry::{Pose2, Real};
+use squall_core::linemap::LineMap;
+use squall_core::motion::MotionNoise;
+use squall_core::sensor::LaserReading;
 
 /// `cgr.laser`: each `LaserReading` becomes an `Observation2d` (beams up
 /// to `max_range`, default 8 m).

@@ -6,14 +6,8 @@
 
 pub mod cgr;
 pub mod cgr_topology;
-pub mod eval;
-pub mod geometry;
-pub mod linemap;
-pub mod map;
 pub mod parfil;
 pub mod pf;
 pub mod pf_topology;
-pub mod sensor;
 pub mod sinks;
 pub mod slam;
-pub mod textfile;

@@ -1,8 +1,8 @@
 //! The sink bolts in a running topology.
 
-use squall_bolts::geometry::Pose2;
-use squall_bolts::map::OccupancyGrid;
-use squall_bolts::sensor::PoseStamped;
+use squall_core::geometry::Pose2;
+use squall_core::occupancy::OccupancyGrid;
+use squall_core::sensor::PoseStamped;
 use squall_topology::{
     BoxError, Declarer, Emitter, Params, Registry, RunOptions, Spout, SpoutStatus, Topology, TopologySpec,
 };

@@ -7,9 +7,10 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
-use squall_bolts::cgr::depth_sim::{Clutter, DepthCamera, DepthFrame, Props};
-use squall_bolts::linemap::LineMap;
-use squall_bolts::sensor::PoseStamped;
+use squall_core::camera::DepthFrame;
+use squall_core::depth_render::{Clutter, DepthCamera, Props};
+use squall_core::linemap::LineMap;
+use squall_core::sensor::PoseStamped;
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 use crate::sim::people::Crowd;

@@ -5,20 +5,18 @@ pub mod carmen;
 pub mod depth;
 #[cfg(feature = "cluster")]
 pub mod live;
-pub mod parfil;
 pub mod rosbag2;
 pub mod sim;
 
 use squall_topology::Registry;
 
-/// Registers every source kind (`sim`, `carmen`, `rosbag2`, `parfil`,
+/// Registers every source kind (`sim`, `carmen`, `rosbag2`,
 /// `depth_sim`; with the `cluster` feature the live link, `live.ingest` and
 /// `live.publish`).
 pub fn register(r: &mut Registry) {
     r.register_spout("sim", sim::SimSpout::from_params);
     r.register_spout("carmen", carmen::CarmenSpout::from_params);
     r.register_spout("rosbag2", rosbag2::Rosbag2Spout::from_params);
-    r.register_spout("parfil", parfil::ParfilSpout::from_params);
     r.register_spout("depth_sim", depth::DepthSimSpout::from_params);
     #[cfg(feature = "cluster")]
     {

@@ -14,9 +14,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use serde::Deserialize;
-use squall_bolts::geometry::Pose2;
-use squall_bolts::map::OccupancyGrid;
-use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_core::geometry::Pose2;
+use squall_core::occupancy::OccupancyGrid;
+use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::cluster::config::{TlsSpec, mismatched_endpoint};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
 use squall_topology::cluster::zenoh;

@@ -4,8 +4,8 @@
 mod common;
 use common::shared;
 
-use squall_bolts::eval::relations::{self, read_relations};
-use squall_bolts::eval::trajectory::Trajectory;
+use squall_core::eval::relations::{self, read_relations};
+use squall_core::trajectory::Trajectory;
 use squall_spouts::carmen::{ReadOptions, read_front_scans};
 use squall_spouts::rosbag2::{BagError, Topics, read_bag};
 

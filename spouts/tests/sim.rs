@@ -2,8 +2,8 @@
 //! consistent with its relations, a laser consistent with the world, and
 //! odometry that drifts.
 
-use squall_bolts::eval::relations::{self, read_relations};
-use squall_bolts::eval::trajectory::Trajectory;
+use squall_core::eval::relations::{self, read_relations};
+use squall_core::trajectory::Trajectory;
 use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
 use squall_spouts::sim::office::office;
 use squall_spouts::sim::output::write_run;

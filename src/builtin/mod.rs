@@ -16,5 +16,6 @@ pub fn registry() -> Registry {
     squall_spouts::register(&mut r);
     squall_bolts::sinks::register(&mut r);
     squall_bolts::pf_topology::register(&mut r);
+    squall_bolts::parfil::register(&mut r);
     r
 }

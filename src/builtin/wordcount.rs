@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, HashMap};
 
 use serde::{Deserialize, Serialize};
 use squall_topology::fsio::write_atomic;
+use squall_topology::hash::{GOLDEN_GAMMA, splitmix64_mix};
 use squall_topology::{
     Bolt, BoxError, Declarer, Emitter, ParamError, Registry, Spout, SpoutStatus, TaskContext, Tuple,
 };
@@ -85,11 +86,8 @@ impl Iterator for SentenceGen {
 
     fn next(&mut self) -> Option<&'static str> {
         // SplitMix64: portable and seedable.
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        Some(CORPUS[((z ^ (z >> 31)) % CORPUS.len() as u64) as usize])
+        self.0 = self.0.wrapping_add(GOLDEN_GAMMA);
+        Some(CORPUS[(splitmix64_mix(self.0) % CORPUS.len() as u64) as usize])
     }
 }
 

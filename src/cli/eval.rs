@@ -3,9 +3,9 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use squall_bolts::eval::ground_truth::{self, GroundTruthScore};
-use squall_bolts::eval::relations::{self, RelationScore, read_relations};
-use squall_bolts::eval::trajectory::Trajectory;
+use squall_core::eval::ground_truth::{self, GroundTruthScore};
+use squall_core::eval::relations::{self, RelationScore, read_relations};
+use squall_core::trajectory::Trajectory;
 use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
 
 use super::EXIT_INVALID;

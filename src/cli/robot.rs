@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use squall_bolts::sensor::{LaserReading, PoseStamped};
+use squall_core::sensor::{LaserReading, PoseStamped};
 use squall_spouts::carmen::{ReadOptions, read_front_scans};
 use squall_spouts::live::{Format, MAP_KEY, ODOM_KEY, POSE_KEY, SCAN_KEY};
 use squall_spouts::rosbag2::messages;

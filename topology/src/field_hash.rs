@@ -9,6 +9,8 @@
 use serde::Serialize;
 use serde::ser::{self, Impossible};
 
+use crate::hash::Fnv1a;
+
 /// Why a value's fields could not be hashed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum FieldHashError {
@@ -26,40 +28,10 @@ impl ser::Error for FieldHashError {
     }
 }
 
-/// FNV-1a 64, finished by a SplitMix64 mix so that `hash % n` is uniform.
-#[derive(Debug, Clone, Copy)]
-struct Fnv(u64);
-
-impl Fnv {
-    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-
-    fn finish(self) -> u64 {
-        let mut z = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-}
-
-impl Extend<u8> for Fnv {
-    fn extend<I: IntoIterator<Item = u8>>(&mut self, bytes: I) {
-        for b in bytes {
-            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(Self::PRIME);
-        }
-    }
-}
-
-impl<'a> Extend<&'a u8> for Fnv {
-    fn extend<I: IntoIterator<Item = &'a u8>>(&mut self, bytes: I) {
-        self.extend(bytes.into_iter().copied());
-    }
-}
-
 /// Hashes the fields of `value` named in `fields`, in the struct's order.
 pub(crate) fn hash_fields<T: Serialize + ?Sized>(value: &T, fields: &[&str]) -> Result<u64, FieldHashError> {
     let hash = value.serialize(FieldHasher { fields })?;
-    Ok(hash.finish())
+    Ok(hash.mixed())
 }
 
 struct FieldHasher<'f> {
@@ -68,11 +40,11 @@ struct FieldHasher<'f> {
 
 struct StructFields<'f> {
     fields: &'f [&'f str],
-    hash: Fnv,
+    hash: Fnv1a,
 }
 
 impl ser::SerializeStruct for StructFields<'_> {
-    type Ok = Fnv;
+    type Ok = Fnv1a;
     type Error = FieldHashError;
 
     fn serialize_field<V: Serialize + ?Sized>(
@@ -87,29 +59,29 @@ impl ser::SerializeStruct for StructFields<'_> {
         Ok(())
     }
 
-    fn end(self) -> Result<Fnv, FieldHashError> {
+    fn end(self) -> Result<Fnv1a, FieldHashError> {
         Ok(self.hash)
     }
 }
 
 macro_rules! not_a_struct {
     ($($name:ident($($arg:ty),*);)*) => {
-        $(fn $name(self, $(_: $arg),*) -> Result<Fnv, FieldHashError> {
+        $(fn $name(self, $(_: $arg),*) -> Result<Fnv1a, FieldHashError> {
             Err(FieldHashError::NotAStruct)
         })*
     };
 }
 
 impl<'f> ser::Serializer for FieldHasher<'f> {
-    type Ok = Fnv;
+    type Ok = Fnv1a;
     type Error = FieldHashError;
-    type SerializeSeq = Impossible<Fnv, FieldHashError>;
-    type SerializeTuple = Impossible<Fnv, FieldHashError>;
-    type SerializeTupleStruct = Impossible<Fnv, FieldHashError>;
-    type SerializeTupleVariant = Impossible<Fnv, FieldHashError>;
-    type SerializeMap = Impossible<Fnv, FieldHashError>;
+    type SerializeSeq = Impossible<Fnv1a, FieldHashError>;
+    type SerializeTuple = Impossible<Fnv1a, FieldHashError>;
+    type SerializeTupleStruct = Impossible<Fnv1a, FieldHashError>;
+    type SerializeTupleVariant = Impossible<Fnv1a, FieldHashError>;
+    type SerializeMap = Impossible<Fnv1a, FieldHashError>;
     type SerializeStruct = StructFields<'f>;
-    type SerializeStructVariant = Impossible<Fnv, FieldHashError>;
+    type SerializeStructVariant = Impossible<Fnv1a, FieldHashError>;
 
     not_a_struct! {
         serialize_bool(bool); serialize_i8(i8); serialize_i16(i16); serialize_i32(i32);
@@ -120,7 +92,7 @@ impl<'f> ser::Serializer for FieldHasher<'f> {
         serialize_unit_variant(&'static str, u32, &'static str);
     }
 
-    fn serialize_some<T: Serialize + ?Sized>(self, _: &T) -> Result<Fnv, FieldHashError> {
+    fn serialize_some<T: Serialize + ?Sized>(self, _: &T) -> Result<Fnv1a, FieldHashError> {
         Err(FieldHashError::NotAStruct)
     }
 
@@ -128,7 +100,7 @@ impl<'f> ser::Serializer for FieldHasher<'f> {
         self,
         _: &'static str,
         value: &T,
-    ) -> Result<Fnv, FieldHashError> {
+    ) -> Result<Fnv1a, FieldHashError> {
         value.serialize(self)
     }
 
@@ -138,7 +110,7 @@ impl<'f> ser::Serializer for FieldHasher<'f> {
         _: u32,
         _: &'static str,
         _: &T,
-    ) -> Result<Fnv, FieldHashError> {
+    ) -> Result<Fnv1a, FieldHashError> {
         Err(FieldHashError::NotAStruct)
     }
 
@@ -173,7 +145,7 @@ impl<'f> ser::Serializer for FieldHasher<'f> {
     }
 
     fn serialize_struct(self, _: &'static str, _: usize) -> Result<Self::SerializeStruct, FieldHashError> {
-        Ok(StructFields { fields: self.fields, hash: Fnv(Fnv::OFFSET) })
+        Ok(StructFields { fields: self.fields, hash: Fnv1a::new() })
     }
 
     fn serialize_struct_variant(

@@ -25,6 +25,7 @@ mod field_hash;
 pub mod fsio;
 pub mod graph;
 mod grouping;
+pub mod hash;
 mod introspect;
 mod message;
 pub mod metrics;

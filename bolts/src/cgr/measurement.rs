@@ -11,9 +11,9 @@ use std::borrow::Cow;
 use serde::{Deserialize, Serialize};
 
 use crate::cgr::observation::Observation2d;
-use crate::cgr::scene::first_hit;
-use crate::geometry::{Pose2, Real};
-use crate::linemap::LineMap;
+use squall_core::geometry::{Pose2, Real};
+use squall_core::linemap::LineMap;
+use squall_core::visibility::first_hit;
 
 /// Measurement and refinement settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -205,7 +205,7 @@ pub fn refine<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cgr::scene::observable_scene;
+    use squall_core::visibility::observable_scene;
 
     fn room() -> LineMap {
         LineMap::parse("room", "0,0,10,0\n10,0,10,10\n10,10,0,10\n0,10,0,0\n4,6,6,6\n6,6,6,7\n").unwrap()

@@ -5,10 +5,8 @@
 //! progress: the particle model, the depth simulator and `squall localize`
 //! follow.
 
-pub mod depth_sim;
 pub mod fspf;
 pub mod measurement;
 pub mod model;
 pub mod observation;
-pub mod scene;
 pub mod scene_grid;

@@ -13,14 +13,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::cgr::measurement::{CgrOptions, refine};
 use crate::cgr::observation::Observation2d;
-use crate::cgr::scene::observable_scene;
 use crate::cgr::scene_grid::SceneGrid;
-use crate::geometry::{Pose2, Real};
-use crate::linemap::LineMap;
 use crate::pf::model::{Correction, Injection, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::slam::model::OdometryStep;
-use crate::slam::motion::{MotionNoise, sample_motion};
+use squall_core::geometry::{Pose2, Real};
+use squall_core::linemap::LineMap;
+use squall_core::motion::{MotionNoise, sample_motion};
+use squall_core::visibility::observable_scene;
 
 /// Where the particles start.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -154,7 +154,7 @@ impl CgrModel {
         // faces the sensor, so turned onto it the sensor is on that side.
         let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
         let normal = (-ey * side / length, ex * side / length);
-        let theta = crate::geometry::normalize_angle(normal.1.atan2(normal.0) - n.1.atan2(n.0));
+        let theta = squall_core::geometry::normalize_angle(normal.1.atan2(normal.0) - n.1.atan2(n.0));
         let (s, c) = theta.sin_cos();
         let robot = (q.0 - (c * p.0 - s * p.1), q.1 - (s * p.0 + c * p.1));
         let sensor =

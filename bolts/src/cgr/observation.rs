@@ -6,8 +6,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::cgr::fspf::PlaneFiltered;
-use crate::geometry::{Pose2, Real};
-use crate::sensor::LaserReading;
+use squall_core::camera::CameraMount;
+use squall_core::geometry::{Pose2, Real};
+use squall_core::sensor::LaserReading;
 
 /// Points and normals seen at one instant.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -102,21 +103,6 @@ impl Observation2d {
         }
         out
     }
-}
-
-/// Where a depth camera sits on the robot.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CameraMount {
-    /// Forward of the robot's origin, metres.
-    pub x: Real,
-    /// Left of it, metres.
-    pub y: Real,
-    /// Height above the floor, metres.
-    pub height: Real,
-    /// Downward pitch, radians.
-    pub tilt: Real,
-    /// Heading relative to the robot, radians.
-    pub yaw: Real,
 }
 
 #[cfg(test)]

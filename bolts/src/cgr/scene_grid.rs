@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::cgr::scene::{distance_to_segment, observable_scene};
-use crate::geometry::Real;
-use crate::linemap::LineMap;
+use squall_core::geometry::Real;
+use squall_core::linemap::LineMap;
+use squall_core::visibility::{distance_to_segment, observable_scene};
+use squall_topology::hash::Fnv1a;
 
 /// Bumped whenever the file layout or the scene algorithm changes.
 const FORMAT: u64 = 3;
@@ -129,22 +130,16 @@ impl SceneGrid {
     /// A hash of the map and the grid settings, stable across runs and
     /// builds (FNV-1a over the numbers' bits).
     pub fn key(map: &LineMap, cell: Real, range: Real) -> u64 {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut eat = |v: u64| {
-            for byte in v.to_le_bytes() {
-                h ^= u64::from(byte);
-                h = h.wrapping_mul(0x0000_0100_0000_01b3);
-            }
-        };
-        eat(FORMAT);
-        eat(cell.to_bits());
-        eat(range.to_bits());
+        let mut h = Fnv1a::new();
+        h.write_u64(FORMAT);
+        h.write_u64(cell.to_bits());
+        h.write_u64(range.to_bits());
         for w in &map.walls {
             for v in [w.a.0, w.a.1, w.b.0, w.b.1] {
-                eat(v.to_bits());
+                h.write_u64(v.to_bits());
             }
         }
-        h
+        h.value()
     }
 
     /// The cache file for these settings in `dir`.

@@ -3,11 +3,11 @@
 //! but without messages. With K = 1 it is the serial filter; any K gives
 //! the same particles, weights and lineage.
 
-use crate::geometry::{Pose2, Real};
 use crate::pf::assign::{Moved, Placement, assign, loads, moved};
 use crate::pf::model::ParticleModel;
 use crate::pf::population::Population;
 use crate::pf::shard::Shard;
+use squall_core::geometry::{Pose2, Real};
 
 /// What one correcting reading did.
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -4,9 +4,9 @@
 
 use rand_chacha::ChaCha8Rng;
 
-use crate::geometry::{Pose2, Real};
 use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
+use squall_core::geometry::{Pose2, Real};
 
 /// The model-specific parts of a particle filter.
 ///

@@ -7,7 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Pose2, Real, normalize_angle};
+use squall_core::geometry::{Pose2, Real, normalize_angle};
 
 /// One place the robot may be.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

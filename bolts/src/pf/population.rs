@@ -5,12 +5,12 @@
 
 use std::sync::Arc;
 
-use crate::geometry::{Pose2, Real};
 use rand::RngExt;
+use squall_core::geometry::{Pose2, Real};
 
 use crate::pf::model::Injection;
 use crate::pf::resample::{Scheme, draw, normalize};
-use crate::pf::rng_for;
+use squall_core::random::stream_for_step;
 
 /// Offset of the random streams that decide injections (slot j uses
 /// `INJECTION_STREAM + j`), apart from every particle's own stream.
@@ -160,7 +160,7 @@ impl Population {
             return Vec::new();
         }
         (0..fits.len())
-            .filter(|&j| rng_for(self.seed, step, INJECTION_STREAM + j as u64).random::<Real>() < p)
+            .filter(|&j| stream_for_step(self.seed, step, INJECTION_STREAM + j as u64).random::<Real>() < p)
             .collect()
     }
 

@@ -9,8 +9,8 @@
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::Real;
-use crate::pf::rng_for;
+use squall_core::geometry::Real;
+use squall_core::random::stream_for_step;
 
 /// How the new particle set is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -32,14 +32,14 @@ pub fn draw(scheme: Scheme, weights: &[Real], seed: u64, step: u64) -> Vec<usize
     let n = weights.len();
     match scheme {
         Scheme::LowVariance => {
-            let u = rng_for(seed, step, u64::MAX).random::<Real>();
+            let u = stream_for_step(seed, step, u64::MAX).random::<Real>();
             low_variance(weights, u)
         }
         Scheme::Ring => (0..n)
             .map(|i| {
                 let neighbours = [(i + n - 1) % n, i, (i + 1) % n];
                 let total: Real = neighbours.iter().map(|&j| weights[j]).sum();
-                let beta = rng_for(seed, step, i as u64).random::<Real>() * total;
+                let beta = stream_for_step(seed, step, i as u64).random::<Real>() * total;
                 let mut cumulative = 0.0;
                 for &j in &neighbours {
                     cumulative += weights[j];
@@ -59,7 +59,7 @@ pub fn draw(scheme: Scheme, weights: &[Real], seed: u64, step: u64) -> Vec<usize
             }
             (0..n)
                 .map(|i| {
-                    let beta = rng_for(seed, step, i as u64).random::<Real>() * sum;
+                    let beta = stream_for_step(seed, step, i as u64).random::<Real>() * sum;
                     cumulative.partition_point(|&c| c < beta).min(n - 1)
                 })
                 .collect()

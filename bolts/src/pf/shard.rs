@@ -9,10 +9,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Pose2, Real};
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::population::INJECTION_STREAM;
-use crate::pf::rng_for;
+use squall_core::geometry::{Pose2, Real};
+use squall_core::random::stream_for_step;
 
 /// One slot's correction, as sent to the resampler.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -63,7 +63,7 @@ impl<M: ParticleModel> Shard<M> {
             .into_iter()
             .map(|slot| {
                 let mut state = start.clone();
-                model.scatter(&mut state, first, &mut rng_for(seed, 0, slot as u64));
+                model.scatter(&mut state, first, &mut stream_for_step(seed, 0, slot as u64));
                 (slot, state)
             })
             .collect();
@@ -100,7 +100,7 @@ impl<M: ParticleModel> Shard<M> {
     /// Moves every held particle by the control of reading `step`.
     pub fn predict(&mut self, model: &M, step: u64, control: &M::Control) {
         for (slot, state) in &mut self.held {
-            let mut rng = rng_for(self.seed, step, *slot as u64);
+            let mut rng = stream_for_step(self.seed, step, *slot as u64);
             model.predict(state, control, &mut rng);
         }
     }
@@ -193,7 +193,11 @@ impl<M: ParticleModel> Shard<M> {
         }
         for (slot, state) in &mut held {
             if fresh.binary_search(slot).is_ok() {
-                model.inject(state, reading, &mut rng_for(self.seed, step, INJECTION_STREAM + *slot as u64));
+                model.inject(
+                    state,
+                    reading,
+                    &mut stream_for_step(self.seed, step, INJECTION_STREAM + *slot as u64),
+                );
             }
         }
         self.held = held;

@@ -10,7 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Pose2, Real, normalize_angle};
+use squall_core::geometry::{Pose2, Real, normalize_angle};
 
 /// How poses between processed scans are filled in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

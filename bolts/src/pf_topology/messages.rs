@@ -4,11 +4,11 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Pose2, Real};
 use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
+use squall_core::geometry::{Pose2, Real};
 
 /// Dispatcher → every matcher task: a reading and its number in the run
 /// (0 starts the filter).

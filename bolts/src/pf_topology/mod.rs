@@ -24,16 +24,16 @@ use squall_topology::{
 
 use crate::cgr::model::CgrModel;
 use crate::cgr::observation::Observation2d;
-use crate::geometry::Pose2;
-use crate::map::OccupancyGrid;
 use crate::parfil::{ParfilModel, ParfilOptions, ParfilReading};
 use crate::pf::ParticleModel;
 use crate::pf_topology::dispatcher::Dispatcher;
 use crate::pf_topology::matcher::Matcher;
-use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::model::{SlamModel, SlamParticle};
 use crate::slam::options::SlamOptions;
+use squall_core::geometry::Pose2;
+use squall_core::occupancy::OccupancyGrid;
+use squall_core::sensor::LaserReading;
 
 /// A [`ParticleModel`] the topology can host: built from a component's
 /// params, its readings and states able to travel, and a snapshot of the

@@ -6,14 +6,14 @@
 use serde::{Deserialize, Serialize};
 use squall_topology::Incremental;
 
-use crate::geometry::Pose2;
+use squall_core::geometry::Pose2;
 use std::sync::Arc;
 
 use crate::pf_topology::messages::{Reading, Transfer};
-use crate::sensor::LaserReading;
 use crate::slam::model::SlamParticle;
 use crate::slam::old_map::MapHistory;
 use crate::slam::transfer::{PackedGrid, Sent, TileStore, UnpackError, pack};
+use squall_core::sensor::LaserReading;
 
 /// A transfer as it crosses: each state's pose, packed map and packed
 /// snapshots.

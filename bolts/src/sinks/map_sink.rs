@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use serde::Deserialize;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
 
-use super::map_files::{write_pgm_yaml, write_png};
-use crate::geometry::Pose2;
-use crate::map::OccupancyGrid;
-use crate::sensor::PoseStamped;
+use squall_core::geometry::Pose2;
+use squall_core::map_files::{write_pgm_yaml, write_png};
+use squall_core::occupancy::OccupancyGrid;
+use squall_core::sensor::PoseStamped;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

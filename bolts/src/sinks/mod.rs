@@ -3,7 +3,6 @@
 //! Every file is written atomically.
 
 mod hypotheses_sink;
-pub mod map_files;
 mod map_sink;
 mod trajectory_sink;
 
@@ -15,7 +14,7 @@ use squall_topology::Registry;
 use squall_topology::fsio::write_atomic;
 pub use trajectory_sink::TrajectorySink;
 
-use crate::eval::trajectory::Trajectory;
+use squall_core::trajectory::Trajectory;
 
 /// Writes `trajectory` to `path` in TUM format (atomically).
 pub fn write_tum(trajectory: &Trajectory, path: &Path) -> std::io::Result<()> {

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use serde::Deserialize;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
 
-use crate::eval::trajectory::Trajectory;
-use crate::sensor::{LaserReading, PoseStamped};
+use squall_core::sensor::{LaserReading, PoseStamped};
+use squall_core::trajectory::Trajectory;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

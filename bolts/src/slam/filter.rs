@@ -12,14 +12,14 @@
 //! never by a thread or task, so the particles may be split over any number
 //! of shards with the same result.
 
-use crate::geometry::Pose2;
 use crate::pf::ParticleModel;
 use crate::pf::trajectory;
 use crate::pf::{Filter, StepReport};
-use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::model::{SlamModel, SlamParticle};
 use crate::slam::options::SlamOptions;
+use squall_core::geometry::Pose2;
+use squall_core::sensor::LaserReading;
 
 /// GMapping's filter.
 #[derive(Debug)]

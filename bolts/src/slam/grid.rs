@@ -12,7 +12,7 @@
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, OnceLock};
 
-use crate::geometry::{Real, round_small};
+use squall_core::geometry::{Real, round_small};
 
 /// Cells per tile side is `1 << TILE_SHIFT`.
 pub const TILE_SHIFT: u32 = 5;
@@ -281,7 +281,7 @@ impl std::hash::Hasher for AddressHasher {
     }
 
     fn write_usize(&mut self, n: usize) {
-        self.0 = (n as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        self.0 = (n as u64).wrapping_mul(squall_topology::hash::GOLDEN_GAMMA);
     }
 }
 
@@ -819,14 +819,14 @@ impl TiledGrid {
 impl TiledGrid {
     /// The explored area as an occupancy grid message: occupancy in percent
     /// for visited cells, unknown elsewhere.
-    pub fn to_occupancy(&self) -> crate::map::OccupancyGrid {
+    pub fn to_occupancy(&self) -> squall_core::occupancy::OccupancyGrid {
         let Some((lo, hi)) = self.cell_bounds() else {
-            return crate::map::OccupancyGrid::unknown(0, 0, self.resolution, self.origin);
+            return squall_core::occupancy::OccupancyGrid::unknown(0, 0, self.resolution, self.origin);
         };
         let (width, height) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
         let corner =
             (self.origin.0 + lo.0 as Real * self.resolution, self.origin.1 + lo.1 as Real * self.resolution);
-        let mut grid = crate::map::OccupancyGrid::unknown(width, height, self.resolution, corner);
+        let mut grid = squall_core::occupancy::OccupancyGrid::unknown(width, height, self.resolution, corner);
         for y in 0..height {
             for x in 0..width {
                 if let Some(p) = self.get((lo.0 + x as i64, lo.1 + y as i64)).occupancy() {
@@ -972,7 +972,7 @@ mod tests {
         assert_eq!(o.get(x, y), 25);
         let (x, y) = o.cell_of(10.0 - 0.25, 20.25).unwrap();
         assert_eq!(o.get(x, y), 0, "visited, never hit: free");
-        assert_eq!(o.get(0, 0), crate::map::UNKNOWN);
+        assert_eq!(o.get(0, 0), squall_core::occupancy::UNKNOWN);
     }
 
     #[test]
@@ -1039,7 +1039,7 @@ mod tests {
             let to = (rng.random_range(-100..100), rng.random_range(-100..100));
             let end = (i % 3 != 0).then_some((to.0 as f32 * 0.1 + 0.03, to.1 as f32 * 0.1 + 0.07));
             fast.add_beam(from, to, end);
-            crate::geometry::line_cells(from, to, |c| {
+            squall_core::geometry::line_cells(from, to, |c| {
                 if c != to {
                     slow.update(c, |cell| cell.visits += 1);
                 }

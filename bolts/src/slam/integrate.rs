@@ -4,9 +4,9 @@
 //! returns and are skipped; beams longer than the usable range are cut there
 //! and mark free space only.
 
-use crate::geometry::{Pose2, Real};
-use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
+use squall_core::geometry::{Pose2, Real};
+use squall_core::sensor::LaserReading;
 
 /// Adds `scan`, taken with the robot at `robot` (world frame), to `grid`,
 /// using beams up to `usable_range` metres. Returns the beams used.

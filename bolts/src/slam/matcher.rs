@@ -21,10 +21,10 @@
 //! One addition, [`Matcher::refine`]: when the climb matches too few beams
 //! (odometry far off), a wide coarse search looks further.
 
-use crate::geometry::{Pose2, Real, round_small};
-use crate::sensor::LaserReading;
 use crate::slam::grid::{FIXED_BITS, TiledGrid};
 use crate::slam::options::{Cutoff, SlamOptions};
+use squall_core::geometry::{Pose2, Real, round_small};
+use squall_core::sensor::LaserReading;
 
 /// GMapping's log-likelihood of a beam that matches nothing, before
 /// division by lσ.

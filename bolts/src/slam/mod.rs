@@ -9,7 +9,6 @@ pub mod grid;
 pub mod integrate;
 pub mod matcher;
 pub mod model;
-pub mod motion;
 pub mod old_map;
 pub mod options;
 #[cfg(test)]

@@ -5,17 +5,17 @@
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
-use crate::sensor::LaserReading;
 use crate::slam::grid::{TILE_BYTES, TiledGrid};
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
-use crate::slam::motion::sample_motion;
 use crate::slam::old_map::{MapHistory, search_old_map};
 use crate::slam::options::SlamOptions;
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::motion::sample_motion;
+use squall_core::sensor::LaserReading;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
 /// way (tiles shared with relatives until written).

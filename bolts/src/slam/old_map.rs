@@ -16,10 +16,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::Real;
 use crate::slam::grid::TiledGrid;
 use crate::slam::matcher::{Matched, Matcher, PreparedScan, covered_beams};
 use crate::slam::options::{Cutoff, SlamOptions};
+use squall_core::geometry::Real;
 
 /// Snapshots of a particle's map: `recent` taken at the last multiple of
 /// the age, `old` at the one before (shared tiles, see the module docs).
@@ -117,9 +117,9 @@ pub fn search_old_map(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Pose2;
     use crate::slam::integrate::integrate_scan;
     use crate::slam::scenes::{mapped, room, scan_of};
+    use squall_core::geometry::Pose2;
 
     #[test]
     fn snapshots_are_taken_every_age_updates_and_share_tiles() {

@@ -3,10 +3,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::Real;
 pub use crate::pf::resample::Scheme;
 pub use crate::pf::trajectory::BetweenScans;
-use crate::slam::motion::MotionNoise;
+use squall_core::geometry::Real;
+use squall_core::motion::MotionNoise;
 
 /// A limit on pose evaluations per particle per reading (seed 003's
 /// scan-matching cutoff). In files: `"none"` or a number.

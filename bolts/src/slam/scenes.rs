@@ -1,11 +1,11 @@
 //! Synthetic scenes for the SLAM unit tests: a room, scans of it without
 //! noise, and maps built from them.
 
-use crate::geometry::Pose2;
-use crate::linemap::LineMap;
-use crate::sensor::LaserReading;
 use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
+use squall_core::geometry::Pose2;
+use squall_core::linemap::LineMap;
+use squall_core::sensor::LaserReading;
 
 /// A scan of `world` from `pose` (no noise), 360 beams over 360°.
 pub(super) fn scan_of(world: &LineMap, pose: &Pose2) -> LaserReading {

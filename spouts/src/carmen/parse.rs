@@ -19,8 +19,8 @@
 
 use std::f64::consts::PI;
 
-use squall_bolts::geometry::{Pose2, Real};
-use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_core::geometry::{Pose2, Real};
+use squall_core::sensor::{LaserReading, Odometry};
 
 /// Which laser a scan came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use flate2::read::MultiGzDecoder;
 
-use squall_bolts::sensor::LaserReading;
+use squall_core::sensor::LaserReading;
 
 use super::parse::{Laser, LineParser, Record};
 

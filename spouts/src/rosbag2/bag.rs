@@ -7,8 +7,8 @@
 
 use std::path::{Path, PathBuf};
 
-use squall_bolts::geometry::{Pose2, normalize_angle};
-use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_core::geometry::{Pose2, normalize_angle};
+use squall_core::sensor::{LaserReading, Odometry};
 
 use super::messages::{self, Transform};
 

@@ -3,8 +3,8 @@
 //! `tf2_msgs/msg/TFMessage`; and those it sends back to a robot, encoded:
 //! `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/OccupancyGrid`.
 
-use squall_bolts::geometry::Pose2;
-use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_core::geometry::Pose2;
+use squall_core::sensor::{LaserReading, Odometry};
 
 use super::cdr::{Cdr, CdrResult, CdrWriter};
 

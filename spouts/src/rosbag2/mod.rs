@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use serde::Deserialize;
-use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_core::sensor::{LaserReading, Odometry};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag};

@@ -4,7 +4,6 @@
 pub mod office;
 pub mod output;
 pub mod people;
-mod rng;
 pub mod roadmap;
 pub mod robot;
 mod spout;
@@ -24,6 +23,6 @@ pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor, String> {
         return Ok(office::office(seed, 3, 2));
     }
     let walls =
-        squall_bolts::linemap::LineMap::load(std::path::Path::new(world)).map_err(|e| e.to_string())?;
+        squall_core::linemap::LineMap::load(std::path::Path::new(world)).map_err(|e| e.to_string())?;
     roadmap::roadmap(walls, ROADMAP_SPACING, ROADMAP_MARGIN).map_err(|e| format!("{world}: {e}"))
 }

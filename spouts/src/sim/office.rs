@@ -3,10 +3,10 @@
 //! furniture in the rooms. The same seed gives the same floor.
 
 use rand::RngExt;
-use squall_bolts::geometry::Real;
+use squall_core::geometry::Real;
 
-use super::rng::rng_for;
-use squall_bolts::linemap::{LineMap, Segment};
+use squall_core::linemap::{LineMap, Segment};
+use squall_core::random::stream_for_purpose;
 
 /// Corridor width, metres.
 pub const CORRIDOR_WIDTH: Real = 2.0;
@@ -74,7 +74,7 @@ fn rect(walls: &mut Vec<Segment>, x0: Real, y0: Real, x1: Real, y1: Real) {
 
 /// Generates a floor of `columns` × `rows` blocks (each at least 1).
 pub fn office(seed: u64, columns: usize, rows: usize) -> Floor {
-    let mut rng = rng_for(seed, "office layout");
+    let mut rng = stream_for_purpose(seed, "office layout");
     let cw = CORRIDOR_WIDTH;
     let widths: Vec<Real> = (0..columns).map(|_| rng.random_range(7.0..11.0)).collect();
     let heights: Vec<Real> = (0..rows).map(|_| rng.random_range(6.0..9.0)).collect();

@@ -7,14 +7,14 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use squall_bolts::eval::trajectory::Trajectory;
-use squall_bolts::geometry::{Pose2, Real, normalize_angle};
-use squall_bolts::map::OccupancyGrid;
-use squall_bolts::sinks::map_files::write_png;
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::map_files::write_png;
+use squall_core::occupancy::OccupancyGrid;
+use squall_core::trajectory::Trajectory;
 use squall_topology::fsio::write_atomic;
 
 use super::robot::{SimEvent, Simulation};
-use squall_bolts::linemap::LineMap;
+use squall_core::linemap::LineMap;
 
 /// Local relations join scans this far apart along the true path, metres.
 pub const LOCAL_RELATION_METRES: Real = 1.0;

@@ -5,11 +5,11 @@
 
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
-use squall_bolts::cgr::depth_sim::Person;
-use squall_bolts::geometry::Real;
+use squall_core::depth_render::Person;
+use squall_core::geometry::Real;
 
 use super::office::Floor;
-use super::rng::rng_for;
+use squall_core::random::stream_for_purpose;
 
 /// Slowest and fastest walking pace, m/s.
 const PACE: (Real, Real) = (0.6, 1.4);
@@ -36,7 +36,7 @@ impl Crowd {
     /// `count` people at random nodes of `floor`, seeded by `seed`. A
     /// floor without edges has nowhere to walk; its people stand still.
     pub fn new(floor: &Floor, count: usize, seed: u64) -> Self {
-        let mut rng = rng_for(seed, "people");
+        let mut rng = stream_for_purpose(seed, "people");
         let walkers = (0..count)
             .map(|_| {
                 let from = rng.random_range(0..floor.nodes.len());

@@ -5,10 +5,10 @@
 
 use std::collections::VecDeque;
 
-use squall_bolts::geometry::Real;
+use squall_core::geometry::Real;
 
 use super::office::{Floor, Route};
-use squall_bolts::linemap::LineMap;
+use squall_core::linemap::LineMap;
 
 /// Distance from point `p` to the segment `a`–`b`.
 fn point_segment(p: (Real, Real), a: (Real, Real), b: (Real, Real)) -> Real {

@@ -8,11 +8,11 @@ use std::f64::consts::PI;
 
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
-use squall_bolts::geometry::{Pose2, Real, normalize_angle};
-use squall_bolts::sensor::{LaserReading, Odometry};
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::sensor::{LaserReading, Odometry};
 
 use super::office::{Floor, Route};
-use super::rng::{gaussian, rng_for};
+use squall_core::random::{standard_normal, stream_for_purpose};
 
 /// What the simulator can be asked for. The defaults are those of
 /// [`SimConfig::default`].
@@ -122,7 +122,7 @@ impl Simulation {
     /// Starts the robot at the floor's first node, facing its first
     /// neighbour.
     pub fn new(floor: Floor, config: SimConfig) -> Self {
-        let mut bias_rng = rng_for(config.seed, "odometry bias");
+        let mut bias_rng = stream_for_purpose(config.seed, "odometry bias");
         let sign = |rng: &mut ChaCha8Rng| if rng.random_bool(0.5) { 1.0 } else { -1.0 };
         let scale_bias = sign(&mut bias_rng) * bias_rng.random_range(0.01..0.02);
         let heading_bias = sign(&mut bias_rng) * bias_rng.random_range(0.15..0.35_f64).to_radians();
@@ -134,9 +134,9 @@ impl Simulation {
         let floor_nodes = floor.nodes.len();
         Simulation {
             steps: (config.duration_secs * PHYSICS_HZ) as u64,
-            route_rng: rng_for(config.seed, "route"),
-            odom_rng: rng_for(config.seed, "odometry noise"),
-            laser_rng: rng_for(config.seed, "laser noise"),
+            route_rng: stream_for_purpose(config.seed, "route"),
+            odom_rng: stream_for_purpose(config.seed, "odometry noise"),
+            laser_rng: stream_for_purpose(config.seed, "laser noise"),
             odometry: truth,
             truth,
             floor,
@@ -270,10 +270,10 @@ impl Simulation {
         let (d_trans, d_rot) = (speed * dt, turn * dt);
         self.truth = self.truth.compose(&Pose2::new(d_trans, 0.0, d_rot));
         let rng = &mut self.odom_rng;
-        let o_trans = d_trans * (1.0 + self.scale_bias) + 0.03 * d_trans.abs() * gaussian(rng);
+        let o_trans = d_trans * (1.0 + self.scale_bias) + 0.03 * d_trans.abs() * standard_normal(rng);
         let o_rot = d_rot
             + self.heading_bias * d_trans.abs()
-            + (0.03 * d_rot.abs() + 0.01 * d_trans.abs()) * gaussian(rng);
+            + (0.03 * d_rot.abs() + 0.01 * d_trans.abs()) * standard_normal(rng);
         self.odometry = self.odometry.compose(&Pose2::new(o_trans, 0.0, o_rot));
         self.step += 1;
     }
@@ -289,7 +289,7 @@ impl Simulation {
                 let dropped = self.laser_rng.random_bool(c.dropout);
                 match hit {
                     Some(r) if !dropped => {
-                        (r + c.range_noise * gaussian(&mut self.laser_rng)).max(0.0) as f32
+                        (r + c.range_noise * standard_normal(&mut self.laser_rng)).max(0.0) as f32
                     }
                     _ => c.range_max as f32,
                 }

@@ -3,7 +3,7 @@
 //! true pose at each scan).
 
 use serde::Deserialize;
-use squall_bolts::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 use super::robot::{SimConfig, SimEvent, Simulation};

@@ -9,7 +9,7 @@ use std::path::Path;
 use squall_topology::fsio::write_atomic;
 
 use crate::geometry::{Pose2, line_cells};
-use crate::map::{OccupancyGrid, UNKNOWN};
+use crate::occupancy::{OccupancyGrid, UNKNOWN};
 
 /// Occupancy (percent) at or above which a cell is drawn occupied.
 pub const OCCUPIED_PERCENT: i8 = 65;

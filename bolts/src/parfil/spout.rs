@@ -4,10 +4,10 @@
 //! (`PoseStamped`, stamped with the iteration). The first reading carries
 //! no motion; it starts the filter.
 
+use super::{ParfilOptions, ParfilReading, ParfilWorld};
 use serde::Deserialize;
-use squall_bolts::geometry::Pose2;
-use squall_bolts::parfil::{ParfilOptions, ParfilReading, ParfilWorld};
-use squall_bolts::sensor::PoseStamped;
+use squall_core::geometry::Pose2;
+use squall_core::sensor::PoseStamped;
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 #[derive(Debug, Deserialize)]

@@ -5,11 +5,11 @@
 //!   relation between two scans, the error of the estimated relative motion.
 //! - [`ground_truth`]: absolute trajectory error after an SE(2) alignment,
 //!   and relative pose error between consecutive poses.
-//! - [`trajectory`]: timestamped poses, read from and written as TUM.
+//!
+//! Both score a [`Trajectory`](crate::trajectory::Trajectory).
 
 pub mod ground_truth;
 pub mod relations;
-pub mod trajectory;
 
 /// Mean and population standard deviation.
 pub(crate) fn mean_std(values: &[f64]) -> (f64, f64) {

@@ -9,9 +9,9 @@
 use serde::Serialize;
 
 use crate::eval::mean_std;
-use crate::eval::trajectory::{Trajectory, TrajectoryError};
 use crate::geometry::{Pose2, normalize_angle};
 use crate::textfile;
+use crate::trajectory::{Trajectory, TrajectoryError};
 
 /// How far (s) a trajectory stamp may be from a relation's stamp to match.
 pub const STAMP_TOLERANCE: f64 = 1e-3;

@@ -5,14 +5,24 @@
 //! particles start uniformly over the room. The third [`ParticleModel`],
 //! cheap per particle, so it measures the topology's own overhead.
 
+mod spout;
+
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
-use crate::slam::motion::standard_normal;
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::random::standard_normal;
+use squall_topology::Registry;
+
+pub use spout::ParfilSpout;
+
+/// Registers the `parfil` spout (the simulated world).
+pub fn register(r: &mut Registry) {
+    r.register_spout("parfil", ParfilSpout::from_params);
+}
 
 /// The room and the noise; `Default` gives the thesis's set-up.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

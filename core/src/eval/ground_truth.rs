@@ -4,8 +4,8 @@
 use serde::Serialize;
 
 use crate::eval::relations::STAMP_TOLERANCE;
-use crate::eval::trajectory::Trajectory;
 use crate::geometry::{Pose2, normalize_angle};
+use crate::trajectory::Trajectory;
 
 /// Absolute and relative errors against ground truth.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -1,0 +1,23 @@
+//! squall-core: the robotics vocabulary every part of squall shares.
+//!
+//! Geometry and poses, sensor readings (laser, odometry, depth frames and
+//! the camera model), occupancy grids and line maps, what is visible from a
+//! point of a line map, trajectories and how the SLAM field scores them, the
+//! odometry motion model, seeded random streams, text parsing helpers, the
+//! map writers and the depth renderer. Pure values and functions: nothing
+//! here runs a topology, so sources (`squall-spouts`) and algorithms
+//! (`squall-bolts`) share it without depending on each other.
+
+pub mod camera;
+pub mod depth_render;
+pub mod eval;
+pub mod geometry;
+pub mod linemap;
+pub mod map_files;
+pub mod motion;
+pub mod occupancy;
+pub mod random;
+pub mod sensor;
+pub mod textfile;
+pub mod trajectory;
+pub mod visibility;
