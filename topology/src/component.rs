@@ -10,7 +10,7 @@ use std::future::Future;
 use crate::context::TaskContext;
 use crate::declare::Declarer;
 use crate::error::BoxError;
-use crate::runtime::local::emitter::Emitter;
+use crate::runtime::emitter::Emitter;
 use crate::tuple::Tuple;
 
 /// What a spout's `next` reports.

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-use crate::runtime::local::Progress;
+use crate::runtime::Progress;
 
 /// The identity and environment of one task, given to `open`/`prepare`.
 #[derive(Debug, Clone)]

@@ -5,7 +5,7 @@
 //! subscription chooses a **grouping** (shuffle, fields, all, global, direct,
 //! local-or-shuffle). Topologies are declared in TOML ([`spec`]), checked
 //! against a [`Registry`] of component kinds ([`Topology::validate`]) and run
-//! by a runtime ([`runtime::local::run`]). The engine knows nothing about
+//! by a runtime ([`runtime::run`]). The engine knows nothing about
 //! robots.
 //!
 //! Guarantees of the in-process runtime:
@@ -47,7 +47,7 @@ pub use metrics::{ComponentReport, CustomMetric, EdgeReport, RunReport, TaskRepo
 pub use params::Params;
 pub use plan::Topology;
 pub use registry::Registry;
-pub use runtime::local::emitter::Emitter;
-pub use runtime::local::{Progress, RunError, RunOptions, run};
+pub use runtime::emitter::Emitter;
+pub use runtime::{Progress, RunError, RunOptions, run};
 pub use spec::{Override, TopologySpec};
 pub use tuple::{Source, Tuple};

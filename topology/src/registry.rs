@@ -8,7 +8,7 @@ use std::sync::Arc;
 use crate::component::{Bolt, Spout};
 use crate::error::ParamError;
 use crate::params::Params;
-use crate::runtime::local::erased::{BoltRunner, SpoutRunner};
+use crate::runtime::erased::{BoltRunner, SpoutRunner};
 
 pub(crate) type SpoutFactory = Arc<dyn Fn(&Params) -> Result<Box<dyn SpoutRunner>, ParamError> + Send + Sync>;
 pub(crate) type BoltFactory = Arc<dyn Fn(&Params) -> Result<Box<dyn BoltRunner>, ParamError> + Send + Sync>;

@@ -4,7 +4,7 @@ use std::collections::HashSet;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::message::Payload;
-use crate::runtime::local::acker::Anchor;
+use crate::runtime::acker::Anchor;
 
 /// Where a tuple came from.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]

@@ -19,10 +19,12 @@ use crate::cluster::session::{self, SessionOptions, control_key, reply_key, send
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, EdgeTraffic, Frame, RunPlan, TaskEvent};
 use crate::metrics::{EdgeReport, RunReport, TaskOutcome};
 use crate::plan::Topology;
-use crate::runtime::local::control::{Event, EventKind, Stage};
+use crate::runtime::control::{Event, EventKind, Stage};
 
-use crate::runtime::local::coordinator::{Coordinator, Hosts};
-use crate::runtime::local::{RunError, RunOptions, build_report, finish_run, lost_outcome};
+use crate::runtime::coordinator::{Coordinator, Hosts};
+use crate::runtime::outcome::{build_report, finish_run};
+use crate::runtime::threads::lost_outcome;
+use crate::runtime::{RunError, RunOptions};
 
 /// How long the coordinator waits for a worker to answer at the start.
 const REACH: Duration = Duration::from_secs(10);

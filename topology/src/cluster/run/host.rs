@@ -16,10 +16,11 @@ use crate::cluster::run::layout::Layout;
 use crate::cluster::run::link::{Inbound, Link, data_key};
 use crate::metrics::TaskOutcome;
 use crate::plan::Topology;
-use crate::runtime::local::control::{Event, Stage};
-use crate::runtime::local::target::Target;
-use crate::runtime::local::wiring::{Hop, Wiring};
-use crate::runtime::local::{RunOptions, TaskThreads, io_runtime, join_tasks, spawn_tasks};
+use crate::runtime::RunOptions;
+use crate::runtime::control::{Event, Stage};
+use crate::runtime::target::Target;
+use crate::runtime::threads::{TaskThreads, io_runtime, join_tasks, spawn_tasks};
+use crate::runtime::wiring::{Hop, Wiring};
 
 /// How long a host waits, once told to go, for every other host's
 /// subscription to reach it.

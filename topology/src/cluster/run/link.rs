@@ -38,7 +38,7 @@ use crate::cluster::wire::{DEFAULT_MAX_FRAME, EdgeTraffic, Frame, Rejections, Wi
 use crate::error::EmitError;
 use crate::grouping::OverflowPolicy;
 use crate::message::CodecState;
-use crate::runtime::local::queue::{EdgeQueue, Push};
+use crate::runtime::queue::{EdgeQueue, Push};
 use crate::tuple::Tuple;
 
 /// Traffic counters of one edge in this process.

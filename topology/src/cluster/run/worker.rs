@@ -15,8 +15,8 @@ use crate::cluster::session::send_control;
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan, TaskEvent};
 use crate::plan::Topology;
 use crate::registry::Registry;
-use crate::runtime::local::RunOptions;
-use crate::runtime::local::control::{Event, EventKind, Stage};
+use crate::runtime::RunOptions;
+use crate::runtime::control::{Event, EventKind, Stage};
 use crate::spec::TopologySpec;
 
 /// How long a worker waits for `Go` after saying it is ready.

@@ -23,11 +23,11 @@ use crate::error::BoxError;
 use crate::metrics::TaskOutcome;
 use crate::params::Params;
 use crate::registry::{BoltFactory, SpoutFactory};
-use crate::runtime::local::Progress;
-use crate::runtime::local::acker::{AckTracker, Outcome, Replay};
-use crate::runtime::local::control::{Control, Event, EventKind, Stage};
-use crate::runtime::local::emitter::Emitter;
-use crate::runtime::local::queue::EdgeQueue;
+use crate::runtime::Progress;
+use crate::runtime::acker::{AckTracker, Outcome, Replay};
+use crate::runtime::control::{Control, Event, EventKind, Stage};
+use crate::runtime::emitter::Emitter;
+use crate::runtime::queue::EdgeQueue;
 use crate::spec::AckPolicy;
 use crate::tuple::Tuple;
 

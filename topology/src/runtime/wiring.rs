@@ -7,12 +7,12 @@ use std::sync::atomic::AtomicBool;
 use crate::context::TaskContext;
 use crate::grouping::{Grouping, OverflowPolicy};
 use crate::plan::Topology;
-use crate::runtime::local::acker::AckTracker;
-use crate::runtime::local::control::{Control, TaskSignal};
-use crate::runtime::local::emitter::{Emitter, PeerRoute, Route, SpoutAcking, StreamRoute, Subscription};
-use crate::runtime::local::queue::EdgeQueue;
-use crate::runtime::local::target::Target;
-use crate::runtime::local::{Progress, RunOptions};
+use crate::runtime::acker::AckTracker;
+use crate::runtime::control::{Control, TaskSignal};
+use crate::runtime::emitter::{Emitter, PeerRoute, Route, SpoutAcking, StreamRoute, Subscription};
+use crate::runtime::queue::EdgeQueue;
+use crate::runtime::target::Target;
+use crate::runtime::{Progress, RunOptions};
 use crate::tuple::Source;
 
 /// Queues, controls and emitters of every task, before the threads start.

@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 use crate::error::EmitError;
 use crate::message::{Message, MessageType, Payload};
 use crate::metrics::TaskStats;
-use crate::runtime::local::acker::{AckTracker, Anchor, Replay};
-use crate::runtime::local::target::Target;
+use crate::runtime::acker::{AckTracker, Anchor, Replay};
+use crate::runtime::target::Target;
 use crate::tuple::{Source, Tuple};
 
 /// How one subscription picks consumer tasks.

@@ -10,8 +10,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use crate::plan::Topology;
-use crate::runtime::local::control::{Event, EventKind, Stage};
-use crate::runtime::local::wiring::Wiring;
+use crate::runtime::control::{Event, EventKind, Stage};
+use crate::runtime::wiring::Wiring;
 use crate::spec::Role;
 
 /// The tasks of a run as the coordinator sees them, wherever they run:

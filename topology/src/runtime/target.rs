@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crate::error::EmitError;
-use crate::runtime::local::queue::{EdgeQueue, Push};
+use crate::runtime::queue::{EdgeQueue, Push};
 use crate::tuple::Tuple;
 
 /// One consumer task's input for one subscription.

@@ -6,7 +6,7 @@ use tokio::runtime::Handle;
 use crate::component::{Bolt, Spout};
 use crate::declare::Declarer;
 use crate::error::BoxError;
-use crate::runtime::local::task::{BoltTask, SpoutTask, run_bolt, run_spout};
+use crate::runtime::task::{BoltTask, SpoutTask, run_bolt, run_spout};
 
 /// A spout instance of some kind.
 pub(crate) trait SpoutRunner: Send {

@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use tokio::sync::Notify;
 
-use crate::runtime::local::control::TaskSignal;
+use crate::runtime::control::TaskSignal;
 
 use crate::grouping::OverflowPolicy;
 use crate::tuple::Tuple;

@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use crate::runtime::local::control::TaskSignal;
+use crate::runtime::control::TaskSignal;
 
 use crate::message::Payload;
 

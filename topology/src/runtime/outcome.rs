@@ -1,0 +1,83 @@
+//! How a run ends: the report built from every task's outcome, and the
+//! error that names the task that failed.
+
+use std::time::Duration;
+
+use crate::metrics::{RunReport, TaskOutcome, component_report};
+use crate::plan::Topology;
+use crate::spec::Role;
+
+/// A run that failed: which task and why, with the metrics up to then.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A task panicked or returned an error (after any restarts).
+    #[error("{role} \"{component}\" task {task} {message}")]
+    TaskFailed {
+        /// Spout or bolt.
+        role: Role,
+        /// The component.
+        component: String,
+        /// The task index.
+        task: usize,
+        /// What happened.
+        message: String,
+        /// Metrics up to the failure.
+        report: Box<RunReport>,
+    },
+    /// The runtime itself could not start.
+    #[error("cannot start the runtime: {0}")]
+    Start(#[from] std::io::Error),
+}
+
+/// The report as the run's result: an error naming the failed task, if any.
+pub(crate) fn finish_run(
+    topology: &Topology,
+    report: RunReport,
+    failure: Option<(usize, usize, String)>,
+) -> Result<RunReport, RunError> {
+    match failure {
+        None => Ok(report),
+        Some((c, task, message)) => {
+            let spec = &topology.components[c].spec;
+            Err(RunError::TaskFailed {
+                role: spec.role,
+                component: spec.name.clone(),
+                task,
+                message,
+                report: Box::new(report),
+            })
+        }
+    }
+}
+
+pub(crate) fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], wall: Duration) -> RunReport {
+    let components: Vec<_> = topology
+        .components
+        .iter()
+        .zip(outcomes)
+        .map(|(p, o)| component_report(&p.spec.name, &p.spec.kind, p.spec.role, o))
+        .collect();
+    let mut warnings = Vec::new();
+    for c in &components {
+        if c.undelivered > 0 {
+            warnings.push(format!(
+                "{} \"{}\": {} tuples arrived after it had exited or at an abort and were not executed",
+                c.role, c.name, c.undelivered
+            ));
+        }
+        if c.abandoned > 0 {
+            warnings.push(format!(
+                "spout \"{}\": {} acked tuples were abandoned after their last replay failed",
+                c.name, c.abandoned
+            ));
+        }
+    }
+    RunReport {
+        topology: topology.spec.name.clone(),
+        seed: topology.spec.seed,
+        wall_secs: wall.as_secs_f64(),
+        components,
+        warnings,
+        edges: Vec::new(),
+    }
+}
