@@ -5,9 +5,19 @@
 //! return values, so they can be tested, benchmarked and reused alone.
 
 pub mod cgr;
-pub mod cgr_topology;
 pub mod parfil;
 pub mod pf;
-pub mod pf_topology;
 pub mod sinks;
 pub mod slam;
+
+use squall_topology::Registry;
+
+/// Registers every kind this crate provides: the particle filter kinds with
+/// their three models (`slam`, `parfil`, `cgr`, in that order), the
+/// localization kinds, the parfil world and the sinks.
+pub fn register(r: &mut Registry) {
+    slam::register(r);
+    parfil::register(r);
+    cgr::register(r);
+    sinks::register(r);
+}

@@ -14,8 +14,6 @@ pub fn registry() -> Registry {
     wordcount::register(&mut r);
     sink::register(&mut r);
     squall_spouts::register(&mut r);
-    squall_bolts::sinks::register(&mut r);
-    squall_bolts::pf_topology::register(&mut r);
-    squall_bolts::parfil::register(&mut r);
+    squall_bolts::register(&mut r);
     r
 }

@@ -5,6 +5,7 @@
 //! particles start uniformly over the room. The third [`ParticleModel`],
 //! cheap per particle, so it measures the topology's own overhead.
 
+mod hosted;
 mod spout;
 
 use rand::RngExt;
@@ -19,9 +20,11 @@ use squall_topology::Registry;
 
 pub use spout::ParfilSpout;
 
-/// Registers the `parfil` spout (the simulated world).
+/// Registers the `parfil` spout (the simulated world) and parfil as the
+/// particle filter kinds' `model = "parfil"`.
 pub fn register(r: &mut Registry) {
     r.register_spout("parfil", ParfilSpout::from_params);
+    crate::pf::kinds::register_model::<ParfilModel>(r, "parfil");
 }
 
 /// The room and the noise; `Default` gives the thesis's set-up.

@@ -8,6 +8,7 @@
 
 pub mod assign;
 pub mod filter;
+pub mod kinds;
 pub mod model;
 pub mod modes;
 pub mod population;

@@ -2,10 +2,11 @@
 //! algorithm parts: the tiled map, the motion model, the scan matcher, the
 //! search against a particle's older map, the particle model, a serial
 //! filter, and map transfers between processes.
-//! The topology kinds are in `pf_topology`.
+//! [`hosted`] puts it on the particle filter kinds (`model = "slam"`).
 
 pub mod filter;
 pub mod grid;
+pub mod hosted;
 pub mod integrate;
 pub mod matcher;
 pub mod model;
@@ -14,3 +15,6 @@ pub mod options;
 #[cfg(test)]
 mod scenes;
 pub mod transfer;
+mod transfer_message;
+
+pub use hosted::register;

@@ -29,11 +29,11 @@ use serde::Deserialize;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
 
 use crate::pf::assign::{Placement, assign, loads, moved, round_robin};
+use crate::pf::kinds::messages::{Decision, Ready, Report, Settings};
 use crate::pf::modes::{Hypotheses, modes};
 use crate::pf::population::Population;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory;
-use crate::pf_topology::messages::{Decision, Ready, Report, Settings};
 use squall_core::geometry::{Pose2, Real};
 use squall_core::sensor::PoseStamped;
 

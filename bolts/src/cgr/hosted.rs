@@ -1,117 +1,44 @@
-//! The localization kinds: `cgr.laser` turns laser scans into the 2-D
-//! points with normals that CGR matches, and the `cgr` model for the
-//! particle filter kinds (`model = "cgr"`), built from the matcher's
-//! params: the map file, particles, start, resampling, measurement and
-//! motion settings, and where precomputed scenes are cached.
+//! Localization on the particle filter kinds (`model = "cgr"`): the model
+//! built from a matcher's params (the map file, particles, start,
+//! resampling, measurement and motion settings, where precomputed scenes
+//! are cached), and the registration of the localization kinds.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use serde::Deserialize;
-use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tuple};
-
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-
-use crate::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
-use crate::cgr::measurement::CgrOptions;
-use crate::cgr::model::{CgrModel, Init, LocalizeOptions};
-use crate::cgr::observation::Observation2d;
-use crate::cgr::scene_grid::SceneGrid;
-use crate::pf::model::Injection;
-use crate::pf::resample::Scheme;
-use crate::pf_topology::from_table;
-use squall_core::camera::{CameraMount, DepthFrame};
-use squall_core::depth_render::DepthCamera;
 use squall_core::geometry::{Pose2, Real};
 use squall_core::linemap::LineMap;
 use squall_core::motion::MotionNoise;
-use squall_core::sensor::LaserReading;
+use squall_topology::Registry;
 
-/// `cgr.laser`: each `LaserReading` becomes an `Observation2d` (beams up
-/// to `max_range`, default 8 m).
-#[derive(Debug)]
-pub struct LaserPoints {
-    max_range: Real,
+use crate::cgr::depth_points::DepthPoints;
+use crate::cgr::laser_points::LaserPoints;
+use crate::cgr::measurement::CgrOptions;
+use crate::cgr::model::{CgrModel, Init, LocalizeOptions};
+use crate::cgr::scene_grid::SceneGrid;
+use crate::pf::kinds::{HostedModel, from_table, register_model};
+use crate::pf::model::Injection;
+use crate::pf::resample::Scheme;
+
+/// Registers `cgr.laser`, `cgr.fspf` and CGR as the particle filter kinds'
+/// `model = "cgr"`.
+pub fn register(r: &mut Registry) {
+    r.register_bolt("cgr.laser", LaserPoints::from_params);
+    r.register_bolt("cgr.fspf", DepthPoints::from_params);
+    register_model::<CgrModel>(r, "cgr");
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LaserParams {
-    #[serde(default = "default_range")]
-    max_range: Real,
-}
+impl HostedModel for CgrModel {
+    type Snapshot = Pose2;
 
-fn default_range() -> Real {
-    8.0
-}
-
-impl LaserPoints {
-    /// Builds it from `max_range`.
-    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
-        let params: LaserParams = p.parse()?;
-        if !(params.max_range.is_finite() && params.max_range > 0.0) {
-            return Err(ParamError::new(format!("max_range must be > 0, got {}", params.max_range)));
-        }
-        Ok(LaserPoints { max_range: params.max_range })
-    }
-}
-
-impl Bolt for LaserPoints {
-    fn declare(&self, d: &mut Declarer) {
-        d.input::<LaserReading>().output::<Observation2d>("default");
+    fn from_table(table: toml::Table) -> Result<Self, String> {
+        cgr_model(table)
     }
 
-    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
-        let scan = input.get::<LaserReading>().ok_or("cgr.laser takes LaserReading")?;
-        out.emit("default", Observation2d::from_laser(scan, self.max_range)).await?;
-        Ok(())
-    }
-}
-
-/// `cgr.fspf`: each `DepthFrame` becomes an `Observation2d`: FSPF, then
-/// the plane points to the robot frame with floor and ceiling dropped
-/// (the camera of the `depth_sim` spout: D435, 0.8 m up, level).
-#[derive(Debug)]
-pub struct DepthPoints {
-    filter: PlaneFilter,
-    mount: CameraMount,
-    rng: ChaCha8Rng,
-    planes: PlaneFiltered,
-}
-
-impl DepthPoints {
-    /// Builds it (params: none yet; the seed is the topology's).
-    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
-        if !p.table().is_empty() {
-            return Err(ParamError::new("cgr.fspf takes no params yet (the D435 on the depth_sim robot)"));
-        }
-        let camera = DepthCamera::d435_on_robot();
-        Ok(DepthPoints {
-            filter: PlaneFilter::new(FspfOptions::default(), camera.intrinsics),
-            mount: camera.mount,
-            rng: ChaCha8Rng::seed_from_u64(p.seed() ^ 0xf5bf),
-            planes: PlaneFiltered::default(),
-        })
-    }
-}
-
-impl Bolt for DepthPoints {
-    fn declare(&self, d: &mut Declarer) {
-        d.input::<DepthFrame>().output::<Observation2d>("default");
-    }
-
-    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
-        let frame = input.get::<DepthFrame>().ok_or("cgr.fspf takes DepthFrame")?;
-        let started = std::time::Instant::now();
-        self.filter.filter(&frame.image, &mut self.rng, &mut self.planes);
-        out.record("fspf_us", started.elapsed().as_micros() as u64);
-        let obs =
-            Observation2d::from_plane_filtered(&self.planes, &self.mount, 0.5, frame.stamp, frame.odometry);
-        out.record("wall_points", obs.points.len() as u64);
-        out.emit("default", obs).await?;
-        Ok(())
+    fn snapshot(&self, state: &Pose2) -> Pose2 {
+        *state
     }
 }
 

@@ -3,17 +3,17 @@
 //! already hold from the sending one (see [`crate::slam::transfer`]).
 //! Within one process transfers share the maps' tiles, as always.
 
-use serde::{Deserialize, Serialize};
-use squall_topology::Incremental;
-
-use squall_core::geometry::Pose2;
 use std::sync::Arc;
 
-use crate::pf_topology::messages::{Reading, Transfer};
+use serde::{Deserialize, Serialize};
+use squall_core::geometry::Pose2;
+use squall_core::sensor::LaserReading;
+use squall_topology::Incremental;
+
+use crate::pf::kinds::messages::{Reading, Transfer};
 use crate::slam::model::SlamParticle;
 use crate::slam::old_map::MapHistory;
 use crate::slam::transfer::{PackedGrid, Sent, TileStore, UnpackError, pack};
-use squall_core::sensor::LaserReading;
 
 /// A transfer as it crosses: each state's pose, packed map and packed
 /// snapshots.

@@ -24,9 +24,9 @@ use std::time::Instant;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
 
 use crate::pf::assign::loads;
+use crate::pf::kinds::HostedModel;
+use crate::pf::kinds::messages::{Decision, Reading, Report, Settings, Transfer};
 use crate::pf::shard::Shard;
-use crate::pf_topology::HostedModel;
-use crate::pf_topology::messages::{Decision, Reading, Report, Settings, Transfer};
 
 /// A correction waiting for its decision and transfers.
 #[derive(Debug)]

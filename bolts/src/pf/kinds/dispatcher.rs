@@ -19,7 +19,7 @@ use std::time::Instant;
 use serde::Deserialize;
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, Message, ParamError, Params, Tuple};
 
-use crate::pf_topology::messages::{Reading, Ready};
+use crate::pf::kinds::messages::{Reading, Ready};
 
 /// How readings wait while the matchers are busy.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]

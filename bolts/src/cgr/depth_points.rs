@@ -1,0 +1,56 @@
+//! `cgr.fspf`: depth frames reduced by Fast Sampling Plane Filtering to the
+//! 2-D points with normals that CGR matches.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use squall_core::camera::{CameraMount, DepthFrame};
+use squall_core::depth_render::DepthCamera;
+use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tuple};
+
+use crate::cgr::fspf::{FspfOptions, PlaneFilter, PlaneFiltered};
+use crate::cgr::observation::Observation2d;
+
+/// `cgr.fspf`: each `DepthFrame` becomes an `Observation2d`: FSPF, then
+/// the plane points to the robot frame with floor and ceiling dropped
+/// (the camera of the `depth_sim` spout: D435, 0.8 m up, level).
+#[derive(Debug)]
+pub struct DepthPoints {
+    filter: PlaneFilter,
+    mount: CameraMount,
+    rng: ChaCha8Rng,
+    planes: PlaneFiltered,
+}
+
+impl DepthPoints {
+    /// Builds it (params: none yet; the seed is the topology's).
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        if !p.table().is_empty() {
+            return Err(ParamError::new("cgr.fspf takes no params yet (the D435 on the depth_sim robot)"));
+        }
+        let camera = DepthCamera::d435_on_robot();
+        Ok(DepthPoints {
+            filter: PlaneFilter::new(FspfOptions::default(), camera.intrinsics),
+            mount: camera.mount,
+            rng: ChaCha8Rng::seed_from_u64(p.seed() ^ 0xf5bf),
+            planes: PlaneFiltered::default(),
+        })
+    }
+}
+
+impl Bolt for DepthPoints {
+    fn declare(&self, d: &mut Declarer) {
+        d.input::<DepthFrame>().output::<Observation2d>("default");
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let frame = input.get::<DepthFrame>().ok_or("cgr.fspf takes DepthFrame")?;
+        let started = std::time::Instant::now();
+        self.filter.filter(&frame.image, &mut self.rng, &mut self.planes);
+        out.record("fspf_us", started.elapsed().as_micros() as u64);
+        let obs =
+            Observation2d::from_plane_filtered(&self.planes, &self.mount, 0.5, frame.stamp, frame.odometry);
+        out.record("wall_points", obs.points.len() as u64);
+        out.emit("default", obs).await?;
+        Ok(())
+    }
+}
