@@ -113,14 +113,18 @@ fn blocks_of(file: &str, text: &str) -> Vec<Block> {
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
     while let Some((line, l)) = lines.next() {
         let Some(info) = l.trim_start().strip_prefix("```") else { continue };
-        let mut block = Block { file: file.to_string(), line, info: info.trim().to_string(), lines: Vec::new() };
+        let mut block =
+            Block { file: file.to_string(), line, info: info.trim().to_string(), lines: Vec::new() };
         let mut pending: Option<(usize, String)> = None;
         for (n, l) in lines.by_ref() {
             if l.trim_start().starts_with("```") {
                 break;
             }
-            let (first, mut joined) = pending.take().unwrap_or((n, String::new()));
-            joined.push_str(l);
+            // A continuation line joins without its indentation.
+            let (first, joined) = match pending.take() {
+                Some((first, head)) => (first, head + l.trim_start()),
+                None => (n, l.to_string()),
+            };
             match joined.strip_suffix('\\') {
                 Some(head) => pending = Some((first, format!("{} ", head.trim_end()))),
                 None => block.lines.push((first, joined)),
@@ -200,8 +204,10 @@ impl Scratch {
         let script = self.root.path().join(format!("block{index}.sh"));
         let body: Vec<String> = block.lines.iter().map(|(_, l)| rewrite(l)).collect();
         std::fs::write(&script, format!("{PRELUDE}\n{}\n", body.join("\n"))).unwrap();
-        let (out_path, err_path) =
-            (self.root.path().join(format!("block{index}.out")), self.root.path().join(format!("block{index}.err")));
+        let (out_path, err_path) = (
+            self.root.path().join(format!("block{index}.out")),
+            self.root.path().join(format!("block{index}.err")),
+        );
         let path = format!(
             "{}:{}",
             self.root.path().join("bin").display(),
@@ -326,7 +332,10 @@ fn the_readme_keeps_its_main_job_runnable_and_its_test_command() {
         readme.lines().any(|l| l.trim() == TEST_COMMAND),
         "README.md lacks the exact line `{TEST_COMMAND}` (what .ci/run runs)"
     );
-    assert!(!runnable_line(TEST_COMMAND), "README.md marks `{TEST_COMMAND}` runnable: this test would run it");
+    assert!(
+        !runnable_line(TEST_COMMAND),
+        "README.md marks `{TEST_COMMAND}` runnable: this test would run it"
+    );
 }
 
 #[test]
@@ -368,7 +377,12 @@ fn every_topology_shown_in_the_docs_is_valid() {
             .current_dir(repo())
             .output()
             .expect("the squall binary runs");
-        assert!(out.status.success(), "{}: invalid topology:\n{}", block.at(), String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}: invalid topology:\n{}",
+            block.at(),
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
 }
 
