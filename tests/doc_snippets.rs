@@ -26,7 +26,9 @@
 //!    the next block starts once they are gone.
 //!
 //! A failing block fails the test with its file and line, the command
-//! that failed and what the block printed.
+//! that failed and what the block printed. As with any `bash -e` script, a
+//! command inside an `&&` or `||` list does not stop the block when it
+//! fails: a check belongs on a line of its own.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
