@@ -4,7 +4,7 @@
 //! a 640-beam laser (Simbad's). The defaults match every other beam
 //! (`lskip` 1; integration still uses them all); a third row per data set
 //! matches every beam, as GMapping's ROS default (`lskip` 0) does, the
-//! C++ GMapping's setting in the README's comparison. Single thread, one
+//! C++ GMapping's setting in docs/results/slam-speed.md's comparison. Single thread, one
 //! run per cell.
 //!
 //!     cargo bench --bench slam

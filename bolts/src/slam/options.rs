@@ -80,7 +80,7 @@ pub struct SlamOptions {
     /// Match and weigh with every (lskip+1)-th beam; maps still get every
     /// beam. The default is 1, every other beam: a third less time per
     /// processed scan, at the accuracy of every beam within the spread of
-    /// seeds (README, "Matching every other beam"). GMapping's is 0.
+    /// seeds (docs/decisions/0001-lskip-default-1.md). GMapping's is 0.
     pub lskip: usize,
     /// Translation noise per metre of translation. The default is 0.1.
     pub srr: Real,
