@@ -215,6 +215,134 @@ fn is_key_safe(name: &str) -> bool {
     !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
 }
 
+/// The checks of one cluster file, collecting every problem found.
+struct Checker<'a> {
+    file: &'a str,
+    text: &'a str,
+    errors: Vec<SpecError>,
+}
+
+impl Checker<'_> {
+    fn error(&self, line: usize, message: String) -> SpecError {
+        SpecError { file: self.file.into(), line, component: None, message }
+    }
+
+    /// Records a problem found at byte `offset` of the file.
+    fn at(&mut self, offset: usize, message: String) {
+        let error = self.error(line_of(self.text, offset), message);
+        self.errors.push(error);
+    }
+
+    /// The cluster's name must be usable in a zenoh key.
+    fn cluster_name(&mut self, name: &Spanned<String>) {
+        if !is_key_safe(name.get_ref()) {
+            let message = format!("cluster name {:?}: expected letters, digits, - or _", name.get_ref());
+            self.at(name.span().start, message);
+        }
+    }
+
+    /// The workers whose endpoints parse, and every declared name in file
+    /// order: placement refers to these (a worker whose endpoint is wrong
+    /// is still declared).
+    fn workers(&mut self, raw: &[Spanned<RawWorker>]) -> (Vec<WorkerSpec>, Vec<String>) {
+        let mut workers = Vec::new();
+        let mut declared = Vec::new();
+        let mut names = HashSet::new();
+        for w in raw {
+            let (span, w) = (w.span(), w.get_ref());
+            let name = w.name.get_ref();
+            declared.push(name.clone());
+            if !is_key_safe(name) {
+                self.at(
+                    w.name.span().start,
+                    format!("worker name {name:?}: expected letters, digits, - or _"),
+                );
+            } else if name == COORDINATOR_NAME {
+                self.at(
+                    w.name.span().start,
+                    format!(
+                        "worker name {name:?} is reserved: placement uses it for the coordinator's process"
+                    ),
+                );
+            } else if !names.insert(name.clone()) {
+                self.at(w.name.span().start, format!("worker {name:?} is declared twice"));
+            }
+            match Endpoint::parse(w.endpoint.get_ref()) {
+                Ok(endpoint) => workers.push(WorkerSpec {
+                    name: name.clone(),
+                    endpoint,
+                    line: line_of(self.text, span.start),
+                }),
+                Err(message) => self.at(w.endpoint.span().start, format!("worker {name:?}: {message}")),
+            }
+        }
+        if raw.is_empty() {
+            let error = self.error(0, "no [[worker]]: a cluster needs at least one worker".into());
+            self.errors.push(error);
+        }
+        (workers, declared)
+    }
+
+    /// Each listed component's hosts, by the names `declared`.
+    fn placement(
+        &mut self,
+        raw: &BTreeMap<String, Spanned<Vec<Spanned<String>>>>,
+        declared: &[String],
+    ) -> BTreeMap<String, Vec<Host>> {
+        let mut placement = BTreeMap::new();
+        for (component, tasks) in raw {
+            let mut indices = Vec::new();
+            for worker in tasks.get_ref() {
+                if worker.get_ref() == COORDINATOR_NAME {
+                    indices.push(Host::Coordinator);
+                    continue;
+                }
+                match declared.iter().position(|w| w == worker.get_ref()) {
+                    Some(i) => indices.push(Host::Worker(i)),
+                    None => self.at(
+                        worker.span().start,
+                        format!("placement of {component:?}: no worker named {:?}", worker.get_ref()),
+                    ),
+                }
+            }
+            if tasks.get_ref().is_empty() {
+                self.at(
+                    tasks.span().start,
+                    format!("placement of {component:?}: expected a worker per task"),
+                );
+            }
+            placement.insert(component.clone(), indices);
+        }
+        placement
+    }
+
+    /// The TLS files, resolved against `folder`; each must exist.
+    fn tls(&mut self, raw: &RawTls, folder: &Path) -> TlsSpec {
+        let resolve = |p: &Spanned<String>| folder.join(p.get_ref());
+        for p in [&raw.root_ca, &raw.certificate, &raw.private_key] {
+            if !resolve(p).is_file() {
+                self.at(p.span().start, format!("no such file: {}", resolve(p).display()));
+            }
+        }
+        TlsSpec {
+            root_ca: resolve(&raw.root_ca),
+            certificate: resolve(&raw.certificate),
+            private_key: resolve(&raw.private_key),
+        }
+    }
+
+    /// With TLS every endpoint is `tls/`; without, every one is `tcp/`.
+    fn endpoint_protocols(&mut self, workers: &[WorkerSpec], tls: bool) {
+        for w in workers {
+            if mismatched_endpoint([&w.endpoint], tls).is_some() {
+                let why = if tls { "with [tls], endpoints are tls/" } else { "tls/ needs a [tls] section" };
+                let error = self.error(w.line, format!("worker {:?}: {why}", w.name));
+                self.errors.push(error);
+            }
+        }
+    }
+}
+
 impl ClusterSpec {
     /// Reads and checks a cluster file.
     pub fn load(path: &Path) -> Result<Self, SpecErrors> {
@@ -232,115 +360,21 @@ impl ClusterSpec {
     /// Checks cluster-file text; `file` names it in errors and relative
     /// TLS paths are taken from `folder`. Reports every problem found.
     pub fn parse(file: &str, text: &str, folder: &Path) -> Result<Self, SpecErrors> {
-        let error =
-            |line: usize, message: String| SpecError { file: file.into(), line, component: None, message };
-        let at = |offset: usize, message: String| error(line_of(text, offset), message);
+        let mut check = Checker { file, text, errors: Vec::new() };
         let raw: RawCluster = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(0, |s| line_of(text, s.start));
-            error(line, e.message().trim().to_string())
+            SpecErrors(vec![check.error(line, e.message().trim().to_string())])
         })?;
-        let mut errors = Vec::new();
-        let header = raw.cluster.get_ref();
-        if !is_key_safe(header.name.get_ref()) {
-            errors.push(at(
-                header.name.span().start,
-                format!("cluster name {:?}: expected letters, digits, - or _", header.name.get_ref()),
-            ));
+        let name = raw.cluster.get_ref().name.clone();
+        check.cluster_name(&name);
+        let (workers, declared) = check.workers(&raw.worker);
+        let placement = check.placement(&raw.placement, &declared);
+        let tls = raw.tls.as_ref().map(|t| check.tls(t.get_ref(), folder));
+        check.endpoint_protocols(&workers, tls.is_some());
+        if !check.errors.is_empty() {
+            return Err(SpecErrors(check.errors));
         }
-        let mut workers = Vec::new();
-        // Every declared name, in file order: placement refers to these
-        // (a worker whose endpoint is wrong is still declared).
-        let mut declared = Vec::new();
-        let mut names = HashSet::new();
-        for w in &raw.worker {
-            let (span, w) = (w.span(), w.get_ref());
-            let name = w.name.get_ref();
-            declared.push(name.clone());
-            if !is_key_safe(name) {
-                errors.push(at(
-                    w.name.span().start,
-                    format!("worker name {name:?}: expected letters, digits, - or _"),
-                ));
-            } else if name == COORDINATOR_NAME {
-                errors.push(at(
-                    w.name.span().start,
-                    format!(
-                        "worker name {name:?} is reserved: placement uses it for the coordinator's process"
-                    ),
-                ));
-            } else if !names.insert(name.clone()) {
-                errors.push(at(w.name.span().start, format!("worker {name:?} is declared twice")));
-            }
-            match Endpoint::parse(w.endpoint.get_ref()) {
-                Ok(endpoint) => {
-                    workers.push(WorkerSpec { name: name.clone(), endpoint, line: line_of(text, span.start) })
-                }
-                Err(message) => {
-                    errors.push(at(w.endpoint.span().start, format!("worker {name:?}: {message}")))
-                }
-            }
-        }
-        if raw.worker.is_empty() {
-            errors.push(error(0, "no [[worker]]: a cluster needs at least one worker".into()));
-        }
-        let mut placement = BTreeMap::new();
-        for (component, tasks) in &raw.placement {
-            let mut indices = Vec::new();
-            for worker in tasks.get_ref() {
-                if worker.get_ref() == COORDINATOR_NAME {
-                    indices.push(Host::Coordinator);
-                    continue;
-                }
-                match declared.iter().position(|w| w == worker.get_ref()) {
-                    Some(i) => indices.push(Host::Worker(i)),
-                    None => errors.push(at(
-                        worker.span().start,
-                        format!("placement of {component:?}: no worker named {:?}", worker.get_ref()),
-                    )),
-                }
-            }
-            if tasks.get_ref().is_empty() {
-                errors.push(at(
-                    tasks.span().start,
-                    format!("placement of {component:?}: expected a worker per task"),
-                ));
-            }
-            placement.insert(component.clone(), indices);
-        }
-        let tls = raw.tls.as_ref().map(|t| {
-            let resolve = |p: &Spanned<String>| folder.join(p.get_ref());
-            let t = t.get_ref();
-            for p in [&t.root_ca, &t.certificate, &t.private_key] {
-                if !resolve(p).is_file() {
-                    errors.push(at(p.span().start, format!("no such file: {}", resolve(p).display())));
-                }
-            }
-            TlsSpec {
-                root_ca: resolve(&t.root_ca),
-                certificate: resolve(&t.certificate),
-                private_key: resolve(&t.private_key),
-            }
-        });
-        for w in &workers {
-            if mismatched_endpoint([&w.endpoint], tls.is_some()).is_some() {
-                let why = if tls.is_some() {
-                    "with [tls], endpoints are tls/"
-                } else {
-                    "tls/ needs a [tls] section"
-                };
-                errors.push(error(w.line, format!("worker {:?}: {why}", w.name)));
-            }
-        }
-        if !errors.is_empty() {
-            return Err(SpecErrors(errors));
-        }
-        Ok(ClusterSpec {
-            file: file.to_string(),
-            name: header.name.get_ref().clone(),
-            workers,
-            placement,
-            tls,
-        })
+        Ok(ClusterSpec { file: file.to_string(), name: name.into_inner(), workers, placement, tls })
     }
 
     /// The host of each of `tasks` tasks of `component`: the explicit

@@ -92,6 +92,8 @@ pub fn run_on_cluster(
     result
 }
 
+/// The steps of a cluster run, in order: reach the workers, place the
+/// tasks, ship the plan, start, drive the shutdown protocol, gather.
 fn coordinate(
     topology: &Topology,
     cluster: &ClusterSpec,
@@ -99,14 +101,7 @@ fn coordinate(
     session: &Session,
     io: &tokio::runtime::Runtime,
 ) -> Result<RunReport, ClusterRunError> {
-    for w in &cluster.workers {
-        io.block_on(session::ping(session, &w.endpoint, REACH)).map_err(|e| {
-            setup(format!(
-                "worker \"{}\" does not answer ({e}): is `squall worker --listen {}` running there?",
-                w.name, w.endpoint
-            ))
-        })?;
-    }
+    reach_workers(cluster, session, io)?;
     let hosts = placement(topology, cluster)?;
     let host_count = cluster.workers.len() + 1;
     let layout = Arc::new(Layout::new(topology, hosts.clone(), host_count).map_err(setup)?);
@@ -124,42 +119,7 @@ fn coordinate(
         host_count: host_count as u16,
         coordinator: session::coordinator_id(session),
     };
-    let reports = {
-        let events_tx = events_tx.clone();
-        session
-            .declare_subscriber(plan(0).report_key())
-            .callback(move |sample| match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
-                Ok(Frame::Control(Control::Event { component, task, event })) => {
-                    let kind = match event {
-                        TaskEvent::SpoutDone => EventKind::SpoutDone,
-                        TaskEvent::Finished => EventKind::Finished,
-                        TaskEvent::Failed(m) => EventKind::Failed(m),
-                        TaskEvent::Exited => EventKind::Exited,
-                    };
-                    let _ =
-                        events_tx.send(Event { component: component as usize, task: task as usize, kind });
-                }
-                Ok(Frame::Control(Control::Totals {
-                    nonce,
-                    host,
-                    accepted,
-                    resolved,
-                    sent_to,
-                    received_from,
-                    ticking,
-                })) => {
-                    let totals = (!ticking).then_some((accepted, resolved, sent_to, received_from));
-                    let _ = up_tx.send(Up::Totals { nonce, host, totals });
-                }
-                Ok(Frame::Control(Control::Outcomes { host, tasks, edges, refused })) => {
-                    let _ = up_tx.send(Up::Outcomes { host, tasks, edges, refused });
-                }
-                Ok(other) => tracing::warn!("coordinator: unexpected report {other:?}"),
-                Err(e) => tracing::warn!("coordinator: refused a report: {e}"),
-            })
-            .wait()
-            .map_err(setup)?
-    };
+    let reports = subscribe_to_reports(session, &plan(0).report_key(), events_tx.clone(), up_tx)?;
     let mut local =
         HostRun::build(topology, layout.clone(), session, &run, (0, host_count), options).map_err(setup)?;
     start_workers(cluster, session, &plan)?;
@@ -168,7 +128,6 @@ fn coordinate(
     let started = Instant::now();
     local.start(topology, options, &events_tx).map_err(setup)?;
     watch_for_lost_workers(io, session, cluster, events_tx.clone())?;
-    let workers: Vec<u16> = (1..host_count as u16).collect();
     let mut hosts_view = ClusterHosts {
         local: &mut local,
         topology,
@@ -178,7 +137,7 @@ fn coordinate(
         session,
         control: control.clone(),
         up: &up,
-        workers,
+        workers: (1..host_count as u16).collect(),
         lost: Vec::new(),
         started,
         warnings: Vec::new(),
@@ -186,74 +145,186 @@ fn coordinate(
         next_nonce: 1,
     };
     let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options.abort_grace);
-    let stash = std::mem::take(&mut hosts_view.stash);
-    let lost = std::mem::take(&mut hosts_view.lost);
-    let mut warnings = std::mem::take(&mut hosts_view.warnings);
-    drop(hosts_view);
+    let ended = hosts_view.end();
     send_control(session, &control, Control::Collect).map_err(setup)?;
-    let mut outcomes: Vec<Vec<Option<TaskOutcome>>> =
-        topology.components.iter().map(|c| vec![None; c.spec.parallelism]).collect();
-    for (c, t, o) in local.join(failure.is_none()) {
-        outcomes[c][t] = Some(o);
+    let mut gathered = Gathered::new(topology, ended.warnings);
+    gathered.local(&mut local, failure.is_none());
+    gathered.workers(cluster, &up, ended.stash, &ended.lost);
+    drop(reports);
+    drop(local);
+    let report = gathered.into_report(topology, &layout, started.elapsed());
+    Ok(finish_run(topology, report, failure)?)
+}
+
+/// Every worker of the cluster file must answer before anything is placed.
+fn reach_workers(
+    cluster: &ClusterSpec,
+    session: &Session,
+    io: &tokio::runtime::Runtime,
+) -> Result<(), ClusterRunError> {
+    for w in &cluster.workers {
+        io.block_on(session::ping(session, &w.endpoint, REACH)).map_err(|e| {
+            setup(format!(
+                "worker \"{}\" does not answer ({e}): is `squall worker --listen {}` running there?",
+                w.name, w.endpoint
+            ))
+        })?;
     }
-    let mut traffic: HashMap<u32, EdgeTraffic> = HashMap::new();
-    let mut merge = |edges: Vec<EdgeTraffic>| {
+    Ok(())
+}
+
+/// Listens on the run's report key: task events go to the shutdown
+/// protocol (`events`), totals and outcomes to `up`.
+fn subscribe_to_reports(
+    session: &Session,
+    key: &str,
+    events: mpsc::Sender<Event>,
+    up: mpsc::Sender<Up>,
+) -> Result<zenoh::pubsub::Subscriber<()>, ClusterRunError> {
+    session
+        .declare_subscriber(key.to_string())
+        .callback(move |sample| match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
+            Ok(Frame::Control(Control::Event { component, task, event })) => {
+                let kind = match event {
+                    TaskEvent::SpoutDone => EventKind::SpoutDone,
+                    TaskEvent::Finished => EventKind::Finished,
+                    TaskEvent::Failed(m) => EventKind::Failed(m),
+                    TaskEvent::Exited => EventKind::Exited,
+                };
+                let _ = events.send(Event { component: component as usize, task: task as usize, kind });
+            }
+            Ok(Frame::Control(Control::Totals {
+                nonce,
+                host,
+                accepted,
+                resolved,
+                sent_to,
+                received_from,
+                ticking,
+            })) => {
+                let totals = (!ticking).then_some((accepted, resolved, sent_to, received_from));
+                let _ = up.send(Up::Totals { nonce, host, totals });
+            }
+            Ok(Frame::Control(Control::Outcomes { host, tasks, edges, refused })) => {
+                let _ = up.send(Up::Outcomes { host, tasks, edges, refused });
+            }
+            Ok(other) => tracing::warn!("coordinator: unexpected report {other:?}"),
+            Err(e) => tracing::warn!("coordinator: refused a report: {e}"),
+        })
+        .wait()
+        .map_err(setup)
+}
+
+/// What the shutdown protocol leaves for the gathering.
+struct Ended {
+    /// Reports that came while waiting for totals.
+    stash: Vec<Up>,
+    /// Workers lost during the run.
+    lost: Vec<u16>,
+    warnings: Vec<String>,
+}
+
+/// Every task's outcome and the traffic between processes, as the hosts
+/// hand them over at the end of a run.
+struct Gathered {
+    /// Per component, per task; `None` until its host reports it.
+    outcomes: Vec<Vec<Option<TaskOutcome>>>,
+    traffic: HashMap<u32, EdgeTraffic>,
+    /// Frames refused: (over the size limit, malformed).
+    refused: (u64, u64),
+    warnings: Vec<String>,
+}
+
+impl Gathered {
+    fn new(topology: &Topology, warnings: Vec<String>) -> Self {
+        Gathered {
+            outcomes: topology.components.iter().map(|c| vec![None; c.spec.parallelism]).collect(),
+            traffic: HashMap::new(),
+            refused: (0, 0),
+            warnings,
+        }
+    }
+
+    fn add_traffic(&mut self, edges: Vec<EdgeTraffic>) {
         for e in edges {
-            let m = traffic.entry(e.edge).or_insert(EdgeTraffic { edge: e.edge, ..Default::default() });
+            let m = self.traffic.entry(e.edge).or_insert(EdgeTraffic { edge: e.edge, ..Default::default() });
             m.messages += e.messages;
             m.bytes += e.bytes;
             m.encode_ns += e.encode_ns;
             m.decode_ns += e.decode_ns;
         }
-    };
-    merge(local.link.traffic());
-    let mut refused = local.link.rejections.totals();
-    let mut missing: Vec<u16> = (1..host_count as u16).filter(|h| !lost.contains(h)).collect();
-    let deadline = Instant::now() + COLLECT;
-    let mut pending = stash.into_iter();
-    while !missing.is_empty() {
-        let next = match pending.next() {
-            Some(u) => u,
-            None => match up.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-                Ok(u) => u,
-                Err(_) => break,
-            },
-        };
-        let Up::Outcomes { host, tasks, edges, refused: (large, bad) } = next else { continue };
-        missing.retain(|&h| h != host);
-        for (c, t, wire) in tasks {
-            let slot = outcomes.get_mut(c as usize).and_then(|c| c.get_mut(t as usize));
-            match (slot, TaskOutcome::from_wire(wire)) {
-                (Some(slot), Ok(o)) => *slot = Some(o),
-                (_, Err(e)) => warnings.push(format!("worker {host}: a task's metrics did not decode: {e}")),
-                (None, _) => warnings.push(format!("worker {host}: metrics for a task that does not exist")),
-            }
+    }
+
+    /// Joins the coordinator's own tasks and takes its traffic.
+    fn local(&mut self, local: &mut HostRun, clean: bool) {
+        for (c, t, o) in local.join(clean) {
+            self.outcomes[c][t] = Some(o);
         }
-        merge(edges);
-        refused = (refused.0 + large, refused.1 + bad);
+        self.add_traffic(local.link.traffic());
+        self.refused = local.link.rejections.totals();
     }
-    for h in missing {
-        warnings.push(format!(
-            "worker \"{}\" sent no metrics: its tasks are reported empty",
-            cluster.workers[usize::from(h) - 1].name
-        ));
+
+    /// Waits (at most `COLLECT`) for every worker still in the run to hand
+    /// over its outcomes, starting with those already in `stash`; a worker
+    /// that sends none is named in a warning and its tasks reported empty.
+    fn workers(&mut self, cluster: &ClusterSpec, up: &mpsc::Receiver<Up>, stash: Vec<Up>, lost: &[u16]) {
+        let host_count = cluster.workers.len() as u16 + 1;
+        let mut missing: Vec<u16> = (1..host_count).filter(|h| !lost.contains(h)).collect();
+        let deadline = Instant::now() + COLLECT;
+        let mut pending = stash.into_iter();
+        while !missing.is_empty() {
+            let next = match pending.next() {
+                Some(u) => u,
+                None => match up.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                    Ok(u) => u,
+                    Err(_) => break,
+                },
+            };
+            let Up::Outcomes { host, tasks, edges, refused: (large, bad) } = next else { continue };
+            missing.retain(|&h| h != host);
+            for (c, t, wire) in tasks {
+                let slot = self.outcomes.get_mut(c as usize).and_then(|c| c.get_mut(t as usize));
+                match (slot, TaskOutcome::from_wire(wire)) {
+                    (Some(slot), Ok(o)) => *slot = Some(o),
+                    (_, Err(e)) => {
+                        self.warnings.push(format!("worker {host}: a task's metrics did not decode: {e}"))
+                    }
+                    (None, _) => {
+                        self.warnings.push(format!("worker {host}: metrics for a task that does not exist"))
+                    }
+                }
+            }
+            self.add_traffic(edges);
+            self.refused = (self.refused.0 + large, self.refused.1 + bad);
+        }
+        for h in missing {
+            self.warnings.push(format!(
+                "worker \"{}\" sent no metrics: its tasks are reported empty",
+                cluster.workers[usize::from(h) - 1].name
+            ));
+        }
     }
-    drop(reports);
-    drop(local);
-    let outcomes: Vec<Vec<TaskOutcome>> = outcomes
-        .into_iter()
-        .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
-        .collect();
-    let mut report = build_report(topology, &outcomes, started.elapsed());
-    report.warnings.append(&mut warnings);
-    if refused.0 + refused.1 > 0 {
-        report.warnings.push(format!(
-            "frames refused between processes: {} over the size limit, {} malformed",
-            refused.0, refused.1
-        ));
+
+    /// The run's report: every task (lost ones empty), the warnings, the
+    /// refused frames and the traffic per edge.
+    fn into_report(self, topology: &Topology, layout: &Layout, elapsed: Duration) -> RunReport {
+        let outcomes: Vec<Vec<TaskOutcome>> = self
+            .outcomes
+            .into_iter()
+            .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
+            .collect();
+        let mut report = build_report(topology, &outcomes, elapsed);
+        let mut warnings = self.warnings;
+        report.warnings.append(&mut warnings);
+        let (large, bad) = self.refused;
+        if large + bad > 0 {
+            report.warnings.push(format!(
+                "frames refused between processes: {large} over the size limit, {bad} malformed"
+            ));
+        }
+        report.edges = edge_reports(layout, topology, self.traffic);
+        report
     }
-    report.edges = edge_reports(&layout, topology, traffic);
-    Ok(finish_run(topology, report, failure)?)
 }
 
 /// Every task's host number: the cluster file's placement, or its default.
@@ -368,6 +439,11 @@ struct ClusterHosts<'a> {
 }
 
 impl ClusterHosts<'_> {
+    /// What the gathering needs once the shutdown protocol is over.
+    fn end(self) -> Ended {
+        Ended { stash: self.stash, lost: self.lost, warnings: self.warnings }
+    }
+
     fn name(&self, host: u16) -> &str {
         self.cluster.workers.get(usize::from(host).wrapping_sub(1)).map_or("coordinator", |w| &w.name)
     }

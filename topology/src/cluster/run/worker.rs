@@ -39,8 +39,9 @@ fn put(session: &Session, key: &str, control: Control) -> Result<(), String> {
 
 /// Hosts `plan` on this worker until the coordinator collects it; answers
 /// on `reply_key`. `release` is told the coordinator once the run is over
-/// for this worker (refused or collected), so its going is not a loss. The topology is validated against `registry`; a plan
-/// that does not fit is refused with the reason.
+/// for this worker (refused or collected), so its going is not a loss. The
+/// topology is validated against `registry`; a plan that does not fit is
+/// refused with the reason.
 pub fn host_run(
     session: &Session,
     plan: &RunPlan,
@@ -54,47 +55,13 @@ pub fn host_run(
         let _ = put(session, reply_key, Control::Refused { run: plan.run.clone(), reason: reason.clone() });
         reason
     };
-    let topology = TopologySpec::parse(&plan.file, &plan.topology)
-        .and_then(|spec| Topology::validate(spec, registry))
-        .map_err(|e| refuse(format!("the topology does not validate here: {e}")))?;
-    let layout =
-        Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(plan.host_count)).map_err(refuse)?);
-    let control = session
-        .declare_subscriber(plan.control_key())
-        .wait()
-        .map_err(|e| refuse(format!("cannot subscribe to run control: {e}")))?;
-    let hosts = (plan.host, usize::from(plan.host_count));
-    let mut host = HostRun::build(&topology, layout, session, &plan.run, hosts, options).map_err(refuse)?;
+    let (topology, control, mut host) = prepare(session, plan, registry, options).map_err(refuse)?;
     put(session, reply_key, Control::Ready { run: plan.run.clone() })?;
-    let report_key = plan.report_key();
-    let control_refused = Rejections::default();
-    let next = |wait: Duration| -> Result<Option<Control>, String> {
-        match control.recv_timeout(wait) {
-            Ok(Some(sample)) => match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
-                Ok(Frame::Control(c)) => Ok(Some(c)),
-                Ok(_) => Ok(None),
-                Err(e) => {
-                    tracing::warn!("worker: refused a run control frame: {e}");
-                    control_refused.count(&e);
-                    Ok(None)
-                }
-            },
-            Ok(None) => Ok(None),
-            Err(e) => Err(format!("run control closed: {e}")),
-        }
-    };
-    // Wait for Go; stages may not come before it.
-    let deadline = Instant::now() + PATIENCE;
-    loop {
-        match next(Duration::from_millis(50))? {
-            Some(Control::Go) => break,
-            Some(Control::Advance { stage, .. }) if stage == Stage::Abort as u8 => {
-                return Ok(Hosted { topology: topology.name().to_string(), tasks: 0, aborted: true });
-            }
-            _ if Instant::now() > deadline => return Err("no Go from the coordinator".into()),
-            _ => {}
-        }
+    let name = topology.name().to_string();
+    if !control.wait_for_go()? {
+        return Ok(Hosted { topology: name, tasks: 0, aborted: true });
     }
+    let report_key = plan.report_key();
     let (events_tx, events) = mpsc::channel();
     if let Err(e) = host.start(&topology, options, &events_tx) {
         // Fail the run in the coordinator's eyes too (in a task of this
@@ -109,78 +76,171 @@ pub fn host_run(
         }
         return Err(e);
     }
-    let mut aborted = false;
-    loop {
-        while let Ok(Event { component, task, kind }) = events.try_recv() {
-            let event = match kind {
-                EventKind::SpoutDone => TaskEvent::SpoutDone,
-                EventKind::Finished => TaskEvent::Finished,
-                EventKind::Failed(m) => TaskEvent::Failed(m),
-                EventKind::Exited => TaskEvent::Exited,
-                EventKind::HostLost(_) => continue,
-            };
-            put(
-                session,
-                &report_key,
-                Control::Event { component: component as u32, task: task as u32, event },
-            )?;
-        }
-        match next(Duration::from_millis(1))? {
-            Some(Control::Advance { component, stage }) => {
-                let Some(stage) = Stage::from_u8(stage) else { continue };
-                aborted |= stage == Stage::Abort;
-                if (component as usize) < topology.components.len() {
-                    host.advance(component as usize, stage);
+    let mut run = Following { session, plan, topology: &topology, options, host: &mut host, report_key };
+    let aborted = run.follow(&control, &events_tx, &events)?;
+    let tasks = run.hand_over(&control, aborted, release)?;
+    Ok(Hosted { topology: name, tasks, aborted })
+}
+
+/// Validates the shipped topology, subscribes to run control and wires
+/// this host's tasks; the error is the reason to refuse the plan.
+fn prepare(
+    session: &Session,
+    plan: &RunPlan,
+    registry: &Registry,
+    options: &RunOptions,
+) -> Result<(Topology, ControlInbox, HostRun), String> {
+    let topology = TopologySpec::parse(&plan.file, &plan.topology)
+        .and_then(|spec| Topology::validate(spec, registry))
+        .map_err(|e| format!("the topology does not validate here: {e}"))?;
+    let layout = Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(plan.host_count))?);
+    let subscriber = session
+        .declare_subscriber(plan.control_key())
+        .wait()
+        .map_err(|e| format!("cannot subscribe to run control: {e}"))?;
+    let control = ControlInbox { subscriber, refused: Rejections::default() };
+    let hosts = (plan.host, usize::from(plan.host_count));
+    let host = HostRun::build(&topology, layout, session, &plan.run, hosts, options)?;
+    Ok((topology, control, host))
+}
+
+/// The coordinator's run control messages, as this worker receives them;
+/// frames that do not decode are counted, not followed.
+struct ControlInbox {
+    subscriber: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    refused: Rejections,
+}
+
+impl ControlInbox {
+    /// The next control message within `wait`, if any.
+    fn next(&self, wait: Duration) -> Result<Option<Control>, String> {
+        match self.subscriber.recv_timeout(wait) {
+            Ok(Some(sample)) => match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
+                Ok(Frame::Control(c)) => Ok(Some(c)),
+                Ok(_) => Ok(None),
+                Err(e) => {
+                    tracing::warn!("worker: refused a run control frame: {e}");
+                    self.refused.count(&e);
+                    Ok(None)
                 }
-            }
-            Some(Control::Status { nonce }) => {
-                let totals = match host.totals() {
-                    Some((accepted, resolved, sent_to, received_from)) => Control::Totals {
-                        nonce,
-                        host: plan.host,
-                        accepted,
-                        resolved,
-                        sent_to,
-                        received_from,
-                        ticking: false,
-                    },
-                    None => Control::Totals {
-                        nonce,
-                        host: plan.host,
-                        accepted: 0,
-                        resolved: 0,
-                        sent_to: Vec::new(),
-                        received_from: Vec::new(),
-                        ticking: true,
-                    },
-                };
-                put(session, &report_key, totals)?;
-            }
-            Some(Control::Reassign { moves, .. }) => {
-                let moves = checked_moves(&topology, &moves, plan.host_count);
-                host.reassign(&topology, options, &events_tx, &moves)
-                    .map_err(|e| format!("cannot start a task moved here: {e}"))?;
-            }
-            Some(Control::Collect) => break,
-            Some(_) | None => {}
+            },
+            Ok(None) => Ok(None),
+            Err(e) => Err(format!("run control closed: {e}")),
         }
     }
-    // Every task has exited when the coordinator collects (after an
-    // abort, those still running after the grace are left behind).
-    let tasks = host.join(!aborted);
-    let count = tasks.len();
-    let outcomes = Control::Outcomes {
-        host: plan.host,
-        tasks: tasks.into_iter().map(|(c, t, o)| (c as u32, t as u32, o.to_wire())).collect(),
-        edges: host.link.traffic(),
-        refused: {
-            let ((a, b), (c, d)) = (host.link.rejections.totals(), control_refused.totals());
-            (a + c, b + d)
-        },
-    };
-    release(&plan.coordinator);
-    put(session, &report_key, outcomes)?;
-    Ok(Hosted { topology: topology.name().to_string(), tasks: count, aborted })
+
+    /// Waits (at most `PATIENCE`) for `Go`: true once it comes, false if
+    /// the run is aborted first. Stages may not come before it.
+    fn wait_for_go(&self) -> Result<bool, String> {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            match self.next(Duration::from_millis(50))? {
+                Some(Control::Go) => return Ok(true),
+                Some(Control::Advance { stage, .. }) if stage == Stage::Abort as u8 => return Ok(false),
+                _ if Instant::now() > deadline => return Err("no Go from the coordinator".into()),
+                _ => {}
+            }
+        }
+    }
+}
+
+/// A started run on this worker, following the coordinator.
+struct Following<'a> {
+    session: &'a Session,
+    plan: &'a RunPlan,
+    topology: &'a Topology,
+    options: &'a RunOptions,
+    host: &'a mut HostRun,
+    report_key: String,
+}
+
+impl Following<'_> {
+    /// Reports task events and follows stages, status requests and moves
+    /// until the coordinator collects; returns whether the run was aborted.
+    fn follow(
+        &mut self,
+        control: &ControlInbox,
+        events_tx: &mpsc::Sender<Event>,
+        events: &mpsc::Receiver<Event>,
+    ) -> Result<bool, String> {
+        let mut aborted = false;
+        loop {
+            while let Ok(Event { component, task, kind }) = events.try_recv() {
+                let event = match kind {
+                    EventKind::SpoutDone => TaskEvent::SpoutDone,
+                    EventKind::Finished => TaskEvent::Finished,
+                    EventKind::Failed(m) => TaskEvent::Failed(m),
+                    EventKind::Exited => TaskEvent::Exited,
+                    EventKind::HostLost(_) => continue,
+                };
+                let event = Control::Event { component: component as u32, task: task as u32, event };
+                put(self.session, &self.report_key, event)?;
+            }
+            match control.next(Duration::from_millis(1))? {
+                Some(Control::Advance { component, stage }) => {
+                    let Some(stage) = Stage::from_u8(stage) else { continue };
+                    aborted |= stage == Stage::Abort;
+                    if (component as usize) < self.topology.components.len() {
+                        self.host.advance(component as usize, stage);
+                    }
+                }
+                Some(Control::Status { nonce }) => put(self.session, &self.report_key, self.totals(nonce))?,
+                Some(Control::Reassign { moves, .. }) => {
+                    let moves = checked_moves(self.topology, &moves, self.plan.host_count);
+                    self.host
+                        .reassign(self.topology, self.options, events_tx, &moves)
+                        .map_err(|e| format!("cannot start a task moved here: {e}"))?;
+                }
+                Some(Control::Collect) => return Ok(aborted),
+                Some(_) | None => {}
+            }
+        }
+    }
+
+    /// This host's totals for status request `nonce` (none while a tick runs).
+    fn totals(&self, nonce: u64) -> Control {
+        let host = self.plan.host;
+        match self.host.totals() {
+            Some((accepted, resolved, sent_to, received_from)) => {
+                Control::Totals { nonce, host, accepted, resolved, sent_to, received_from, ticking: false }
+            }
+            None => Control::Totals {
+                nonce,
+                host,
+                accepted: 0,
+                resolved: 0,
+                sent_to: Vec::new(),
+                received_from: Vec::new(),
+                ticking: true,
+            },
+        }
+    }
+
+    /// Joins this host's tasks and hands their metrics and the traffic to
+    /// the coordinator; returns how many tasks ran here.
+    fn hand_over(
+        &mut self,
+        control: &ControlInbox,
+        aborted: bool,
+        release: &dyn Fn(&str),
+    ) -> Result<usize, String> {
+        // Every task has exited when the coordinator collects (after an
+        // abort, those still running after the grace are left behind).
+        let tasks = self.host.join(!aborted);
+        let count = tasks.len();
+        let outcomes = Control::Outcomes {
+            host: self.plan.host,
+            tasks: tasks.into_iter().map(|(c, t, o)| (c as u32, t as u32, o.to_wire())).collect(),
+            edges: self.host.link.traffic(),
+            refused: {
+                let ((a, b), (c, d)) = (self.host.link.rejections.totals(), control.refused.totals());
+                (a + c, b + d)
+            },
+        };
+        release(&self.plan.coordinator);
+        put(self.session, &self.report_key, outcomes)?;
+        Ok(count)
+    }
 }
 
 /// The moves that name tasks of this topology and hosts of this run.
