@@ -234,9 +234,11 @@ impl<B: Bolt> BoltHarness<B> {
         &self.bolt
     }
 
-    /// Wires the emitter and calls the bolt's `prepare`.
+    /// Wires the emitter (once) and calls the bolt's `prepare`.
     pub fn prepare(&mut self) -> Result<(), BoxError> {
-        self.wire();
+        if self.emitter.is_none() {
+            self.wire();
+        }
         self.runtime.block_on(self.bolt.prepare(&self.ctx))
     }
 
