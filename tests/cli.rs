@@ -4,8 +4,13 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::time::Duration;
 
 use squall::builtin::wordcount::SentenceGen;
+
+mod common;
+
+use common::{LOG_PROGRESS, finish_within, logged_progress, wait_for};
 
 fn squall(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_squall"))
@@ -172,37 +177,62 @@ fn help_shows_examples() {
     }
 }
 
+/// Whether process `pid` has installed a handler for SIGINT (bit 2 of the
+/// caught-signals mask in Linux's /proc/PID/status).
+fn catches_sigint(pid: u32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1 << (2 - 1)) != 0)
+}
+
 #[test]
 fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     let dir = out_dir("ctrl-c");
+    let log = std::env::temp_dir().join(format!("squall-cli-{}-ctrl-c.stderr", std::process::id()));
+    // A billion probes through a relay that takes 200 µs each: the source
+    // is held back by full queues (1024 per edge) whenever Ctrl-C comes.
     let child = Command::new(env!("CARGO_BIN_EXE_squall"))
         .args(["run", "examples/topologies/probe.toml", "--set", "source.params.count=1000000000"])
-        .args(["--set", "source.params.rate_hz=100000", "--out", dir.to_str().unwrap()])
+        .args(["--set", "relay.params.delay_us=200", "--out", dir.to_str().unwrap()])
+        .env("SQUALL_LOG", LOG_PROGRESS)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(&log).unwrap())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let stderr = || std::fs::read_to_string(&log).unwrap_or_default();
+    // Interrupt once the handler is in place and both queues have filled.
+    let limit = Duration::from_secs(60);
+    wait_for("the Ctrl-C handler", limit, || catches_sigint(child.id()), stderr);
+    wait_for("3000 probes sent", limit, || logged_progress(&stderr()).is_some_and(|n| n >= 3000), stderr);
+    let sent_before = logged_progress(&stderr()).unwrap();
     let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(killed.success());
-    let out = child.wait_with_output().unwrap();
-    let stderr = text(&out.stderr);
+    let out = finish_within(child, limit, stderr);
+    let stderr = stderr();
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("stopped early by Ctrl-C"), "{stderr}");
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
-    let counts: Vec<(u64, u64)> = metrics["components"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| (c["received"].as_u64().unwrap(), c["emitted"].as_u64().unwrap()))
-        .collect();
-    let emitted = counts[0].1;
-    assert!(emitted > 0 && emitted < 1_000_000_000);
-    assert_eq!(counts[1], (emitted, emitted), "relay: every emitted tuple was processed");
-    assert_eq!(counts[2].0, emitted, "sink: every emitted tuple was processed");
+    let component = |name: &str| {
+        let c = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
+        let count = |key: &str| c[key].as_u64().unwrap();
+        (count("received"), count("emitted"), count("dropped") + count("undelivered"))
+    };
+    let (_, emitted, _) = component("source");
+    assert!(emitted >= sent_before, "{emitted} probes sent, but {sent_before} were logged before Ctrl-C");
+    // Everything the source sent before it stopped went through, although
+    // up to 2048 probes were queued when it stopped.
+    assert_eq!(component("relay"), (emitted, emitted, 0), "relay: (executed, forwarded, lost)");
+    assert_eq!(component("sink"), (emitted, 0, 0), "sink: (executed, emitted, lost)");
+    let relay = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "relay").unwrap();
+    assert_eq!(relay["queue_depth_max"], 1024, "the relay's queue filled up");
+    assert!(text(&out.stdout).starts_with("topology \"probe\""), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&log);
 }
 
 fn shared_data(rel: &str) -> String {
@@ -598,6 +628,7 @@ fn speedup_runs_every_configuration_and_writes_a_table_csv_and_plot() {
     assert!(dir.join("p10-k2/trajectory.tum").exists());
     let out = squall(&["speedup", "--matchers", "0", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("matchers ≥ 1"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -662,6 +693,12 @@ fn localize_tracks_a_simulated_robot_in_a_real_building_map() {
     assert!(text(&bad.stderr).contains("--resampling"), "{}", text(&bad.stderr));
     let bad = squall(&["localize", "--map", &map, "--out", one.to_str().unwrap()]);
     assert_eq!(bad.status.code(), Some(2));
+    assert_eq!(
+        text(&bad.stderr),
+        "error: --sim is required: recorded depth and laser input come later\n",
+        "localize without --sim refuses before running anything"
+    );
+    assert!(bad.stdout.is_empty(), "{}", text(&bad.stdout));
     for d in [one, two, cache] {
         let _ = std::fs::remove_dir_all(d);
     }

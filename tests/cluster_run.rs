@@ -12,7 +12,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 use common::cluster::Workers;
-use common::{finish_within, output_within};
+use common::{LOG_PROGRESS, finish_within, logged_progress, output_within, wait_for};
 
 /// How long any one run may take before the test fails as hung: the
 /// longest (the whole ACES log) takes 12–20 s here.
@@ -329,19 +329,27 @@ fn slam_goes_on_when_a_matcher_s_worker_is_lost_halfway_and_keeps_its_track() {
     let done =
         squall(&["slam", "--log", &log, "--particles", "30", "--out", unbroken.path().to_str().unwrap()]);
     assert!(done.status.success(), "{}", text(&done.stderr));
-    let run = command(&["slam", "--log", &log, "--matchers", "3", "--particles", "30"])
+    let coordinator_log = workers.dir().join("coordinator.log");
+    let mut run = command(&["slam", "--log", &log, "--matchers", "3", "--particles", "30"])
         .args(["--out", broken.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()])
+        .env("SQUALL_LOG", LOG_PROGRESS)
         .stdout(Stdio::null())
-        .stderr(Stdio::piped())
+        .stderr(std::fs::File::create(&coordinator_log).unwrap())
         .spawn()
         .unwrap();
-    // The whole log takes 12–20 s here: lose the second worker about halfway.
-    let log_of_w2 = workers.wait_for_log(1, "hosting run");
-    assert!(log_of_w2.contains("hosting run"), "{log_of_w2}");
-    std::thread::sleep(Duration::from_secs(6));
+    // Lose the second worker halfway: once the source has sent 7000 of the
+    // log's 14 749 readings (scans and odometry, alternating). The
+    // dispatcher takes one scan at a time, so the source is at most its
+    // queue of 1024 scans ahead of the matchers: they have processed some
+    // 2 500 scans by then, and over 3 000 (seconds of work) remain, so the
+    // run cannot end in the moment between the log line and the kill.
+    let stderr = || std::fs::read_to_string(&coordinator_log).unwrap_or_default();
+    let halfway = || logged_progress(&stderr()).is_some_and(|sent| sent >= 7_000);
+    wait_for("the source to send 7000 readings", HUNG, halfway, || stderr() + &workers.logs());
+    assert!(run.try_wait().unwrap().is_none(), "the run ended before the worker was killed: {}", stderr());
     workers.children[1].kill().unwrap();
     let done = finish_within(run, HUNG, || workers.logs());
-    let stderr = text(&done.stderr);
+    let stderr = stderr();
     assert!(done.status.success(), "{stderr}\n{}", workers.log(0));
     let m = metrics(broken.path());
     let warnings = m["warnings"].to_string();

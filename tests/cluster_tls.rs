@@ -11,7 +11,7 @@ use common::certs::{authority, tls};
 
 use squall::topology::cluster::config::{Endpoint, Protocol, TlsSpec};
 use squall::topology::cluster::session::{
-    SessionError, SessionOptions, WorkerPresence, control_key, open, ping, reply_key,
+    SessionError, SessionOptions, WorkerPresence, control_key, open, ping, reply_key, worker_key,
 };
 use squall::topology::cluster::wire::{Control, Frame};
 
@@ -57,7 +57,9 @@ fn a_peer_without_the_clusters_certificate_cannot_join_publish_or_read() {
         let coordinator = open(&member("coordinator", "ca")).await.unwrap();
         let name =
             ping(&coordinator, &endpoint, Duration::from_secs(20)).await.expect("a member is answered");
-        assert!(!name.is_empty());
+        // The answer comes from the worker listening there, by its name.
+        assert_eq!(name, worker_key(&endpoint));
+        assert_eq!(name, format!("tls_127.0.0.1_{}", endpoint.port), "the worker's name is its endpoint");
         let stopped = tokio::time::timeout(Duration::from_millis(300), worker.stopped()).await;
         assert!(stopped.is_err(), "the worker stopped: {stopped:?}");
         // Nor did the rogue overhear the member's answer.

@@ -1,13 +1,19 @@
-//! A progress bar on stderr while a run goes, when stderr is a terminal.
+//! A progress bar on stderr while a run goes, when stderr is a terminal;
+//! otherwise, with `SQUALL_LOG=squall::cli::progress=info` (or any filter
+//! that lets its info lines through), one log line a second: a log file,
+//! a supervisor or a test can follow a run. Without either, nothing.
 
 use std::io::IsTerminal;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use squall_topology::Progress;
+
+/// How often progress is logged when stderr is not a terminal.
+const LOG_PERIOD: Duration = Duration::from_secs(1);
 
 /// Redraws the bar from the runtime's live counters until finished.
 pub(super) struct ProgressDisplay {
@@ -16,11 +22,16 @@ pub(super) struct ProgressDisplay {
 }
 
 impl ProgressDisplay {
-    /// Starts drawing, if stderr is a terminal.
+    /// Starts drawing, if stderr is a terminal, or logging, if info lines
+    /// of this module are logged.
     pub(super) fn start(progress: Arc<Progress>) -> Self {
         let stop = Arc::new(AtomicBool::new(false));
         if !std::io::stderr().is_terminal() {
-            return ProgressDisplay { stop, thread: None };
+            let thread = tracing::enabled!(tracing::Level::INFO).then(|| {
+                let flag = stop.clone();
+                std::thread::spawn(move || log_progress(&progress, &flag))
+            });
+            return ProgressDisplay { stop, thread };
         }
         let flag = stop.clone();
         let thread = std::thread::spawn(move || {
@@ -55,6 +66,24 @@ impl ProgressDisplay {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.thread.take() {
             let _ = t.join();
+        }
+    }
+}
+
+/// Logs the counters every [`LOG_PERIOD`] until `stop`, as
+/// `N tuples from spouts` (with ` of TOTAL` once the spouts said).
+fn log_progress(progress: &Progress, stop: &AtomicBool) {
+    let mut last = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(100));
+        if last.elapsed() < LOG_PERIOD {
+            continue;
+        }
+        last = Instant::now();
+        let emitted = progress.emitted.load(Ordering::Relaxed);
+        match progress.expected.load(Ordering::Relaxed) {
+            0 => tracing::info!("{emitted} tuples from spouts"),
+            expected => tracing::info!("{emitted} tuples from spouts of {expected}"),
         }
     }
 }

@@ -1,6 +1,7 @@
 //! Helpers shared by the end-to-end tests.
 #![allow(dead_code)]
 
+#[cfg(feature = "cluster")]
 pub(crate) mod certs;
 pub(crate) mod cluster;
 
@@ -74,4 +75,36 @@ pub(crate) fn output_within(
     use std::process::Stdio;
     let child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the command starts");
     finish_within(child, limit, context)
+}
+
+/// Polls `ready` every 20 ms until it holds; fails the test with `what`
+/// and `context()` (what the process printed so far) if it does not within
+/// `limit`.
+pub(crate) fn wait_for(
+    what: &str,
+    limit: std::time::Duration,
+    mut ready: impl FnMut() -> bool,
+    context: impl Fn() -> String,
+) {
+    let deadline = std::time::Instant::now() + limit;
+    while !ready() {
+        assert!(std::time::Instant::now() < deadline, "waited {limit:?} for {what}; so far:\n{}", context());
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// The filter that makes `squall` log its progress (`N tuples from
+/// spouts`, once a second, when stderr is not a terminal) and otherwise
+/// what it logs by default.
+pub(crate) const LOG_PROGRESS: &str =
+    "warn,zenoh::net::runtime::orchestrator=error,squall::cli::progress=info";
+
+/// The highest count of tuples from spouts that a run logged with
+/// [`LOG_PROGRESS`] in `stderr`.
+pub(crate) fn logged_progress(stderr: &str) -> Option<u64> {
+    stderr
+        .lines()
+        .filter_map(|l| l.split_once(" tuples from spouts"))
+        .filter_map(|(before, _)| before.rsplit(' ').next()?.parse().ok())
+        .max()
 }

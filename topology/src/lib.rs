@@ -6,7 +6,7 @@
 //! local-or-shuffle). Topologies are declared in TOML ([`spec`]), checked
 //! against a [`Registry`] of component kinds ([`Topology::validate`]) and run
 //! by a runtime ([`runtime::run`]). The engine knows nothing about
-//! robots.
+//! robots. [`testing`] runs one bolt task alone, for unit tests.
 //!
 //! Guarantees of the in-process runtime:
 //! - every queue is bounded; a full queue blocks the producer or drops by
@@ -34,6 +34,7 @@ mod plan;
 mod registry;
 pub mod runtime;
 pub mod spec;
+pub mod testing;
 mod tuple;
 
 pub use component::{Bolt, MessageId, Spout, SpoutStatus};

@@ -137,7 +137,7 @@ pub enum CustomMetric {
     },
 }
 
-fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<String, CustomMetric> {
+pub(crate) fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<String, CustomMetric> {
     custom
         .iter()
         .map(|(k, v)| {

@@ -22,6 +22,9 @@ struct Num {
 /// What every recorder saw: (component, task, seq).
 type Log = Arc<Mutex<Vec<(String, usize, u64)>>>;
 
+/// When something happened, in the order it happened.
+type Times = Arc<Mutex<Vec<Instant>>>;
+
 #[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 struct SourceParams {
@@ -35,6 +38,8 @@ struct Numbers {
     p: SourceParams,
     next: u64,
     emitted: Arc<AtomicU64>,
+    /// When each emit returned.
+    emitted_at: Times,
     acked: Log,
     failed: Log,
 }
@@ -54,6 +59,7 @@ impl Spout for Numbers {
         } else {
             out.emit("default", n).await?;
         }
+        self.emitted_at.lock().unwrap().push(Instant::now());
         self.next += 1;
         self.emitted.fetch_add(1, Ordering::SeqCst);
         Ok(SpoutStatus::Continue)
@@ -88,6 +94,8 @@ struct Recorder {
     /// Spout emits minus tuples executed, sampled at each execute.
     in_flight_max: Arc<AtomicU64>,
     emitted: Arc<AtomicU64>,
+    /// When each execute ended (before the bolt gives its queue slot back).
+    executed_at: Times,
     executed: u64,
     failed_once: BTreeSet<u64>,
 }
@@ -117,6 +125,7 @@ impl Bolt for Recorder {
             std::thread::sleep(Duration::from_micros(self.p.delay_us));
         }
         self.executed += 1;
+        self.executed_at.lock().unwrap().push(Instant::now());
         if n.seq < self.p.fail_first && self.failed_once.insert(n.seq) {
             out.fail();
             return Ok(());
@@ -134,6 +143,8 @@ struct Harness {
     acked: Log,
     failed: Log,
     emitted: Arc<AtomicU64>,
+    emitted_at: Times,
+    executed_at: Times,
     in_flight_max: Arc<AtomicU64>,
 }
 
@@ -144,6 +155,8 @@ impl Harness {
             acked: Default::default(),
             failed: Default::default(),
             emitted: Default::default(),
+            emitted_at: Default::default(),
+            executed_at: Default::default(),
             in_flight_max: Default::default(),
         }
     }
@@ -151,17 +164,20 @@ impl Harness {
     fn registry(&self) -> Registry {
         let mut r = Registry::new();
         let (emitted, acked, failed) = (self.emitted.clone(), self.acked.clone(), self.failed.clone());
+        let emitted_at = self.emitted_at.clone();
         r.register_spout("numbers", move |p: &Params| {
             Ok(Numbers {
                 p: p.parse()?,
                 next: 0,
                 emitted: emitted.clone(),
+                emitted_at: emitted_at.clone(),
                 acked: acked.clone(),
                 failed: failed.clone(),
             })
         });
         let (log, in_flight_max, emitted) =
             (self.log.clone(), self.in_flight_max.clone(), self.emitted.clone());
+        let executed_at = self.executed_at.clone();
         r.register_bolt("recorder", move |p: &Params| {
             Ok(Recorder {
                 p: p.parse()?,
@@ -170,6 +186,7 @@ impl Harness {
                 log: log.clone(),
                 in_flight_max: in_flight_max.clone(),
                 emitted: emitted.clone(),
+                executed_at: executed_at.clone(),
                 executed: 0,
                 failed_once: BTreeSet::new(),
             })
@@ -290,9 +307,7 @@ fn slow_bolt(count: u64, queue: usize, policy: &str, delay_us: u64) -> String {
 fn block_bounds_in_flight_and_slows_the_spout() {
     let h = Harness::new();
     let count = 200;
-    let started = Instant::now();
     let report = h.run(&slow_bolt(count, 4, "block", 1000)).unwrap();
-    let elapsed = started.elapsed();
     assert!(
         h.in_flight_max.load(Ordering::SeqCst) <= 4,
         "in flight {}",
@@ -300,10 +315,19 @@ fn block_bounds_in_flight_and_slows_the_spout() {
     );
     assert!(report.component("b").unwrap().queue_depth_max <= 4);
     assert_eq!(report.component("b").unwrap().received, count);
-    // The spout cannot finish before the bolt has worked through all but the
-    // queue's worth: it was slowed down to the bolt's pace.
+    // The spout was slowed to the bolt's pace: when an emit returned, the
+    // bolt had executed all but the queue's 4 slots' worth of what the
+    // spout had sent (a `block` queue counts the tuples the bolt holds
+    // until it has executed them). An emit that did not wait would be a
+    // hundred tuples ahead of a bolt that takes 1 ms per tuple.
+    let (emitted_at, executed_at) = (h.emitted_at.lock().unwrap(), h.executed_at.lock().unwrap());
+    assert_eq!((emitted_at.len(), executed_at.len()), (count as usize, count as usize));
+    for (i, sent) in emitted_at.iter().enumerate() {
+        let executed = executed_at.iter().filter(|done| *done <= sent).count();
+        let ahead = (i + 1).saturating_sub(executed);
+        assert!(ahead <= 4, "when tuple {i} was emitted the spout was {ahead} tuples ahead of the bolt");
+    }
     let spout_wall = report.component("src").unwrap().per_task[0].busy_pct;
-    assert!(elapsed >= Duration::from_millis(count - 4), "{elapsed:?}");
     assert!(spout_wall < 50.0, "a blocked spout waits rather than works: busy {spout_wall}%");
 }
 
