@@ -19,7 +19,6 @@ use squall_core::occupancy::OccupancyGrid;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::cluster::config::{TlsSpec, mismatched_endpoint};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
-use squall_topology::cluster::zenoh;
 use squall_topology::{
     Bolt, BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext, Tuple,
 };

@@ -108,7 +108,11 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         }
         other => return Err(format!("--init must be known or global, got {other}")),
     }
-    let mut out: Vec<Override> = sets.iter().map(|s| s.parse()).collect::<Result<_, _>>()?;
+    let mut out: Vec<Override> = sets
+        .iter()
+        .map(|s| s.parse())
+        .collect::<Result<_, squall_topology::OverrideError>>()
+        .map_err(|e| e.to_string())?;
     out.extend(args.overrides.iter().cloned());
     Ok(out)
 }

@@ -59,7 +59,7 @@ struct TopologyArgs {
     overrides: Vec<Override>,
 }
 
-fn parse_override(s: &str) -> Result<Override, String> {
+fn parse_override(s: &str) -> Result<Override, squall_topology::OverrideError> {
     s.parse()
 }
 

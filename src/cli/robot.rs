@@ -14,7 +14,6 @@ use squall_spouts::carmen::{ReadOptions, read_front_scans};
 use squall_spouts::live::{Format, MAP_KEY, ODOM_KEY, POSE_KEY, SCAN_KEY};
 use squall_spouts::rosbag2::messages;
 use squall_topology::cluster::session::{SessionOptions, endpoints, open};
-use squall_topology::cluster::zenoh;
 
 use super::tls::TlsArgs;
 use super::{EXIT_FAILED, EXIT_INVALID};

@@ -81,7 +81,11 @@ fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
     if let Some(s) = args.seed {
         sets.push(format!("topology.seed={s}"));
     }
-    let mut out: Vec<Override> = sets.iter().map(|s| s.parse()).collect::<Result<_, _>>()?;
+    let mut out: Vec<Override> = sets
+        .iter()
+        .map(|s| s.parse())
+        .collect::<Result<_, squall_topology::OverrideError>>()
+        .map_err(|e| e.to_string())?;
     out.extend(args.overrides.iter().cloned());
     Ok(out)
 }

@@ -17,6 +17,19 @@ impl ParamError {
     }
 }
 
+/// A message could not be encoded for, or decoded from, another process:
+/// the error of an [`Incremental`](crate::Incremental) codec.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct CodecError(pub String);
+
+impl CodecError {
+    /// A codec error saying what is wrong with the bytes or the state.
+    pub fn new(message: impl fmt::Display) -> Self {
+        CodecError(message.to_string())
+    }
+}
+
 /// An emit that the engine refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum EmitError {
@@ -57,3 +70,38 @@ pub enum EmitError {
     #[error("cannot send to another process: {0}")]
     Transport(String),
 }
+
+/// Any error of the engine, for callers that chain its steps with `?`
+/// (read a topology, validate it, run it) and report what went wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The topology file does not check.
+    #[error(transparent)]
+    Spec(#[from] crate::spec::SpecErrors),
+    /// A `--set` override does not parse or fit the file.
+    #[error(transparent)]
+    Override(#[from] crate::spec::OverrideError),
+    /// A component's parameters are invalid.
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    /// An emit was refused.
+    #[error(transparent)]
+    Emit(#[from] EmitError),
+    /// A message did not cross processes.
+    #[error(transparent)]
+    Codec(#[from] CodecError),
+    /// The run failed.
+    #[error(transparent)]
+    Run(#[from] crate::runtime::RunError),
+    /// A cluster run could not start or failed.
+    #[cfg(feature = "cluster")]
+    #[error(transparent)]
+    Cluster(#[from] crate::cluster::run::ClusterRunError),
+    /// A process of a cluster run could not take part.
+    #[cfg(feature = "cluster")]
+    #[error(transparent)]
+    Host(#[from] crate::cluster::HostError),
+}
+
+/// The engine's result: [`Error`] unless a step names its own error.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -13,6 +13,7 @@ use std::sync::Arc;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use crate::error::CodecError;
 use crate::field_hash::{FieldHashError, hash_fields};
 use crate::introspect::struct_field_names;
 
@@ -38,11 +39,11 @@ pub trait Incremental: Message {
 
     /// The message's bytes, leaving out what `sent` says the receiver
     /// holds (and recording what it will hold).
-    fn encode_incremental(&self, sent: &mut Self::Sent) -> Result<Vec<u8>, String>;
+    fn encode_incremental(&self, sent: &mut Self::Sent) -> Result<Vec<u8>, CodecError>;
 
     /// The message back from its bytes and what the receiver holds; an
     /// error if the bytes are damaged or refer to something not held.
-    fn decode_incremental(bytes: &[u8], held: &mut Self::Held) -> Result<Self, String>;
+    fn decode_incremental(bytes: &[u8], held: &mut Self::Held) -> Result<Self, CodecError>;
 }
 
 /// Per-pair state of an [`Incremental`] codec, type-erased.
@@ -55,8 +56,8 @@ pub(crate) type CodecState = Box<dyn Any + Send>;
 pub(crate) struct IncrementalCodec {
     pub(crate) new_sent: fn() -> CodecState,
     pub(crate) new_held: fn() -> CodecState,
-    pub(crate) encode: fn(&(dyn Any + Send + Sync), &mut CodecState) -> Result<Vec<u8>, String>,
-    pub(crate) decode: fn(&[u8], &mut CodecState) -> Result<Payload, String>,
+    pub(crate) encode: fn(&(dyn Any + Send + Sync), &mut CodecState) -> Result<Vec<u8>, CodecError>,
+    pub(crate) decode: fn(&[u8], &mut CodecState) -> Result<Payload, CodecError>,
 }
 
 /// Run-time description of a stream's message type.
@@ -190,12 +191,12 @@ fn decode_payload<T: Message>(bytes: &[u8]) -> Result<Payload, postcard::Error> 
 fn encode_incremental<T: Incremental>(
     payload: &(dyn Any + Send + Sync),
     sent: &mut CodecState,
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, CodecError> {
     let sent = sent.downcast_mut::<T::Sent>().expect("the codec's own sender state");
     downcast::<T>(payload).encode_incremental(sent)
 }
 
-fn decode_incremental<T: Incremental>(bytes: &[u8], held: &mut CodecState) -> Result<Payload, String> {
+fn decode_incremental<T: Incremental>(bytes: &[u8], held: &mut CodecState) -> Result<Payload, CodecError> {
     let held = held.downcast_mut::<T::Held>().expect("the codec's own receiver state");
     Ok(Arc::new(T::decode_incremental(bytes, held)?))
 }

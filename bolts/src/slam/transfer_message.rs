@@ -8,7 +8,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use squall_core::geometry::Pose2;
 use squall_core::sensor::LaserReading;
-use squall_topology::Incremental;
+use squall_topology::{CodecError, Incremental};
 
 use crate::pf::kinds::messages::{Reading, Transfer};
 use crate::slam::model::SlamParticle;
@@ -58,24 +58,20 @@ impl Incremental for Transfer<SlamParticle, LaserReading> {
     type Sent = Sent;
     type Held = TileStore;
 
-    fn encode_incremental(&self, sent: &mut Sent) -> Result<Vec<u8>, String> {
+    fn encode_incremental(&self, sent: &mut Sent) -> Result<Vec<u8>, CodecError> {
         let states = self.states.iter().map(|(slot, p)| PackedParticle::pack(*slot, p, sent)).collect();
         sent.end_message();
         let packed = PackedTransfer { step: self.step, states, reading: self.reading.clone() };
-        postcard::to_stdvec(&packed).map_err(|e| e.to_string())
+        postcard::to_stdvec(&packed).map_err(CodecError::new)
     }
 
-    fn decode_incremental(bytes: &[u8], held: &mut TileStore) -> Result<Self, String> {
-        let packed: PackedTransfer = postcard::from_bytes(bytes).map_err(|e| e.to_string())?;
+    fn decode_incremental(bytes: &[u8], held: &mut TileStore) -> Result<Self, CodecError> {
+        let packed: PackedTransfer = postcard::from_bytes(bytes).map_err(CodecError::new)?;
         let states =
             packed.states.into_iter().map(|p| p.unpack(held)).collect::<Result<Vec<_>, UnpackError>>();
         // The sender ended its message whatever it held; so does the store.
         held.end_message();
-        Ok(Transfer {
-            step: packed.step,
-            states: states.map_err(|e| e.to_string())?,
-            reading: packed.reading,
-        })
+        Ok(Transfer { step: packed.step, states: states.map_err(CodecError::new)?, reading: packed.reading })
     }
 }
 

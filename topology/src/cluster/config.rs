@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::cluster::PlacementError;
 use crate::spec::{SpecError, SpecErrors};
 
 /// The name placement uses for the coordinator's own process.
@@ -75,8 +76,8 @@ pub enum Protocol {
 impl Endpoint {
     /// Parses `tcp/HOST:PORT` or `tls/HOST:PORT`; the error says what was
     /// expected.
-    pub fn parse(text: &str) -> Result<Self, String> {
-        let expected = || format!("expected tcp/HOST:PORT or tls/HOST:PORT, found {text:?}");
+    pub fn parse(text: &str) -> Result<Self, EndpointError> {
+        let expected = || EndpointError::Malformed(text.to_string());
         let (protocol, address) = match text.split_once('/') {
             Some(("tcp", address)) => (Protocol::Tcp, address),
             Some(("tls", address)) => (Protocol::Tls, address),
@@ -88,8 +89,9 @@ impl Endpoint {
             None => address.rsplit_once(':'),
         }
         .ok_or_else(expected)?;
-        let port =
-            port.parse::<u16>().map_err(|_| format!("{}: port {port:?} is not 0–65535", expected()))?;
+        let port = port
+            .parse::<u16>()
+            .map_err(|_| EndpointError::Port { text: text.to_string(), port: port.to_string() })?;
         let bracketed = host.starts_with('[') && host.ends_with(']');
         if host.is_empty() || (host.contains(':') && !bracketed) || host.contains('/') {
             return Err(expected());
@@ -106,6 +108,22 @@ impl std::fmt::Display for Endpoint {
         };
         write!(f, "{protocol}/{}:{}", self.host, self.port)
     }
+}
+
+/// An endpoint that is not `tcp/HOST:PORT` or `tls/HOST:PORT`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EndpointError {
+    /// Not of the form PROTOCOL/HOST:PORT with a known protocol.
+    #[error("expected tcp/HOST:PORT or tls/HOST:PORT, found {0:?}")]
+    Malformed(String),
+    /// The port is not a number 0–65535.
+    #[error("expected tcp/HOST:PORT or tls/HOST:PORT, found {text:?}: port {port:?} is not 0–65535")]
+    Port {
+        /// The endpoint as given.
+        text: String,
+        /// Its port part.
+        port: String,
+    },
 }
 
 /// A worker process of the cluster.
@@ -383,14 +401,15 @@ impl ClusterSpec {
     /// dispatchers, sinks: where the run's input and output files are) and
     /// a parallel one is spread evenly over the workers (task i on worker
     /// i mod n).
-    pub fn place(&self, component: &str, tasks: usize) -> Result<Vec<Host>, String> {
+    pub fn place(&self, component: &str, tasks: usize) -> Result<Vec<Host>, PlacementError> {
         match self.placement.get(component) {
             Some(explicit) if explicit.len() == tasks => Ok(explicit.clone()),
-            Some(explicit) => Err(format!(
-                "{}: placement of {component:?} names {} hosts, but it has {tasks} tasks",
-                self.file,
-                explicit.len()
-            )),
+            Some(explicit) => Err(PlacementError::Listed {
+                file: self.file.clone(),
+                component: component.to_string(),
+                listed: explicit.len(),
+                tasks,
+            }),
             None if tasks == 1 => Ok(vec![Host::Coordinator]),
             None => Ok((0..tasks).map(|i| Host::Worker(i % self.workers.len())).collect()),
         }
@@ -425,7 +444,7 @@ mod tests {
         assert_eq!(c.place("matcher", 3).unwrap(), vec![w1, w0, w1]);
         assert_eq!(c.place("resampler", 3).unwrap(), vec![w0, w1, w0]);
         assert_eq!(c.place("sink", 1).unwrap(), vec![Host::Coordinator]);
-        assert!(c.place("matcher", 2).unwrap_err().contains("names 3 hosts, but it has 2 tasks"));
+        assert!(c.place("matcher", 2).unwrap_err().to_string().contains("names 3 hosts, but it has 2 tasks"));
         let explicit = parse(&TWO.replace("[\"w2\", \"w1\", \"w2\"]", "[\"coordinator\", \"w1\"]")).unwrap();
         assert_eq!(explicit.place("matcher", 2).unwrap(), vec![Host::Coordinator, w0]);
         assert!(

@@ -4,11 +4,10 @@
 //! and the runs themselves.
 
 pub mod config;
+mod error;
 pub mod outcome;
 pub mod run;
 pub mod session;
 pub mod wire;
 
-/// The zenoh this build uses, for components that talk to it directly
-/// (the live robot link).
-pub use zenoh;
+pub use error::{HostError, PlacementError};

@@ -6,6 +6,7 @@ use std::time::Duration;
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
 
+use crate::cluster::wire::WireError;
 use crate::metrics::{Custom, TaskOutcome, TaskStats, new_histogram};
 
 /// A task's outcome as it travels from a worker to the coordinator:
@@ -44,12 +45,12 @@ fn histogram_bytes(h: &Histogram<u64>) -> Vec<u8> {
     bytes
 }
 
-fn histogram_from(bytes: &[u8]) -> Result<Histogram<u64>, String> {
+fn histogram_from(bytes: &[u8]) -> Result<Histogram<u64>, WireError> {
     let h: Histogram<u64> = hdrhistogram::serialization::Deserializer::new()
         .deserialize(&mut &bytes[..])
-        .map_err(|e| format!("bad histogram: {e:?}"))?;
+        .map_err(|e| WireError::Histogram(format!("{e:?}")))?;
     let mut bounded = new_histogram();
-    bounded.add(&h).map_err(|e| format!("histogram out of bounds: {e:?}"))?;
+    bounded.add(&h).map_err(|e| WireError::HistogramBounds(format!("{e:?}")))?;
     Ok(bounded)
 }
 
@@ -89,7 +90,7 @@ impl TaskOutcome {
 
     /// The outcome back from its portable form; an error if a histogram
     /// does not decode.
-    pub(crate) fn from_wire(w: OutcomeWire) -> Result<Self, String> {
+    pub(crate) fn from_wire(w: OutcomeWire) -> Result<Self, WireError> {
         let mut custom = BTreeMap::new();
         for (k, v) in w.custom {
             let v = match v {

@@ -12,7 +12,8 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 
-use crate::cluster::config::{Endpoint, TlsSpec};
+use crate::cluster::HostError;
+use crate::cluster::config::{Endpoint, EndpointError, TlsSpec};
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan};
 
 /// Errors opening or using a cluster session.
@@ -94,7 +95,7 @@ pub async fn shared(options: &SessionOptions) -> Result<Session, SessionError> {
 }
 
 /// Parses endpoint strings (component parameters, command-line flags).
-pub fn endpoints(texts: &[String]) -> Result<Vec<Endpoint>, String> {
+pub fn endpoints(texts: &[String]) -> Result<Vec<Endpoint>, EndpointError> {
     texts.iter().map(|t| Endpoint::parse(t)).collect()
 }
 
@@ -276,8 +277,10 @@ async fn watch_coordinators(
 /// than dropping it. A put's default is to drop when the link's queue is
 /// full, which it is while tuples stream, and a lost `Finished`, `Totals`
 /// or `Go` would leave a run waiting forever.
-pub(crate) fn send_control(session: &Session, key: &str, control: Control) -> Result<(), String> {
-    put_waiting(session, key.to_string(), Frame::Control(control).encode()).wait().map_err(|e| e.to_string())
+pub(crate) fn send_control(session: &Session, key: &str, control: Control) -> Result<(), HostError> {
+    put_waiting(session, key.to_string(), Frame::Control(control).encode())
+        .wait()
+        .map_err(|e| HostError::Zenoh(e.to_string()))
 }
 
 /// A put of `bytes` on `key` that waits for room on the link instead of

@@ -231,6 +231,12 @@ pub enum WireError {
     /// The body does not decode as a frame.
     #[error("malformed frame: {0}")]
     Malformed(String),
+    /// A histogram of a task's metrics does not decode.
+    #[error("bad histogram: {0}")]
+    Histogram(String),
+    /// A histogram of a task's metrics exceeds the bounds of squall's.
+    #[error("histogram out of bounds: {0}")]
+    HistogramBounds(String),
     /// The body decodes but bytes follow it.
     #[error("{0} bytes after the frame")]
     Trailing(usize),

@@ -392,6 +392,27 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "a panic with a non-string payload".to_string())
 }
 
+/// How one incarnation of a task ended.
+enum Incarnation {
+    /// It ran to its end.
+    Done,
+    /// Its code returned an error.
+    Failed(BoxError),
+    /// It panicked, with this message.
+    Panicked(String),
+}
+
+impl Incarnation {
+    /// One run of a task's code, caught if it panics.
+    fn of(run: impl FnOnce() -> Result<(), BoxError>) -> Self {
+        match catch_unwind(AssertUnwindSafe(run)) {
+            Ok(Ok(())) => Incarnation::Done,
+            Ok(Err(e)) => Incarnation::Failed(e),
+            Err(panic) => Incarnation::Panicked(panic_message(&*panic)),
+        }
+    }
+}
+
 /// Access to the state every task kind has.
 pub(crate) trait HasCommon {
     fn common(&mut self) -> &mut TaskCommon;
@@ -414,13 +435,13 @@ impl HasCommon for SpoutTask {
 fn supervise<T: HasCommon>(
     task: &mut T,
     max_restarts: u32,
-    mut run_once: impl FnMut(&mut T) -> Result<Result<(), BoxError>, String>,
+    mut run_once: impl FnMut(&mut T) -> Incarnation,
 ) -> Option<String> {
     loop {
         let failure = match run_once(task) {
-            Ok(Ok(())) => return None,
-            Ok(Err(e)) => format!("failed: {e}"),
-            Err(panic) => format!("panicked: {panic}"),
+            Incarnation::Done => return None,
+            Incarnation::Failed(e) => format!("failed: {e}"),
+            Incarnation::Panicked(panic) => format!("panicked: {panic}"),
         };
         let common = task.common();
         if common.control.stage() >= Stage::Abort {
@@ -452,10 +473,8 @@ pub(crate) fn bolt_thread(
 ) -> TaskOutcome {
     let started = Instant::now();
     let failure = supervise(&mut task, max_restarts, |task| match factory(&params) {
-        Ok(mut bolt) => {
-            catch_unwind(AssertUnwindSafe(|| bolt.run(task, &runtime))).map_err(|p| panic_message(&*p))
-        }
-        Err(e) => Ok(Err(format!("could not be created: {e}").into())),
+        Ok(mut bolt) => Incarnation::of(|| bolt.run(task, &runtime)),
+        Err(e) => Incarnation::Failed(format!("could not be created: {e}").into()),
     });
     // Whatever is still queued can no longer be executed.
     task.release_batch();
@@ -479,10 +498,8 @@ pub(crate) fn spout_thread(
 ) -> TaskOutcome {
     let started = Instant::now();
     let failure = supervise(&mut task, max_restarts, |task| match factory(&params) {
-        Ok(mut spout) => {
-            catch_unwind(AssertUnwindSafe(|| spout.run(task, &runtime))).map_err(|p| panic_message(&*p))
-        }
-        Err(e) => Ok(Err(format!("could not be created: {e}").into())),
+        Ok(mut spout) => Incarnation::of(|| spout.run(task, &runtime)),
+        Err(e) => Incarnation::Failed(format!("could not be created: {e}").into()),
     });
     finish_thread(&mut task.common, failure, started, &[])
 }

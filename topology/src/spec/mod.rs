@@ -16,7 +16,7 @@ use toml::Spanned;
 
 pub(crate) use error::SourceText;
 pub use error::{Role, SpecError, SpecErrors};
-pub use overrides::Override;
+pub use overrides::{Misfit, Override, OverrideError};
 
 use crate::declare::DEFAULT_STREAM;
 use crate::grouping::{Grouping, OverflowPolicy};
@@ -140,11 +140,11 @@ impl TopologySpec {
         let text = if overrides.is_empty() {
             text
         } else {
-            edited = overrides::apply(text, overrides).map_err(|message| SpecError {
+            edited = overrides::apply(text, overrides).map_err(|e| SpecError {
                 file: file.into(),
                 line: 0,
                 component: None,
-                message,
+                message: e.to_string(),
             })?;
             edited.as_str()
         };

@@ -17,6 +17,77 @@ const COMPONENT_KEYS: &[&str] =
 const INPUT_KEYS: &[&str] = &["from", "stream", "grouping", "fields", "queue", "policy", "feedback"];
 const TOPOLOGY_KEYS: &[&str] = &["name", "seed"];
 
+/// Why an override could not be read or applied.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum OverrideError {
+    /// The argument has no `=`.
+    #[error("--set {0}: expected PATH=VALUE, e.g. matcher.parallelism=4")]
+    NoEquals(String),
+    /// PATH is not `COMPONENT.KEY[.KEY...]` or `topology.KEY`.
+    #[error("--set {0}: PATH must be COMPONENT.KEY[.KEY...] or topology.KEY")]
+    BadPath(String),
+    /// The topology text itself is not TOML, so nothing can be edited.
+    #[error("not valid TOML: {0}")]
+    NotToml(String),
+    /// The override does not fit the file.
+    #[error("--set {set}: {problem}")]
+    Misfit {
+        /// The override as given.
+        set: String,
+        /// What does not fit.
+        problem: Misfit,
+    },
+}
+
+/// How an override does not fit the topology file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Misfit {
+    /// A key the file contract does not have at that place.
+    #[error("unknown key \"{key}\" for {place} (expected one of {expected})")]
+    UnknownKey {
+        /// The key.
+        key: String,
+        /// Where it was looked for.
+        place: String,
+        /// The keys allowed there, comma-separated.
+        expected: String,
+    },
+    /// `topology.KEY` with no `[topology]` table.
+    #[error("the file has no [topology] table")]
+    NoTopologyTable,
+    /// No component of that name.
+    #[error("no component named \"{name}\" (components: {components})")]
+    NoComponent {
+        /// The name asked for.
+        name: String,
+        /// The file's components, comma-separated.
+        components: String,
+    },
+    /// Outside `params`, a path must exist to be set below.
+    #[error("\"{0}\" is not set in the file, so nothing below it can be set")]
+    NotSet(String),
+    /// A path ends at a table of an array of tables.
+    #[error("a whole table cannot be replaced; set its keys")]
+    WholeTable,
+    /// A path goes below an empty item.
+    #[error("\"{0}\" is below an empty item")]
+    BelowEmpty(String),
+    /// A path goes below a plain value.
+    #[error("\"{0}\" is below a value that is not a table or list")]
+    BelowValue(String),
+    /// A list index that is not a number.
+    #[error("\"{0}\" must be an index into a list")]
+    NotAnIndex(String),
+    /// A list index past the end.
+    #[error("index {index} is out of range (the list has {len} entries)")]
+    OutOfRange {
+        /// The index given.
+        index: usize,
+        /// The list's length.
+        len: usize,
+    },
+}
+
 /// One `PATH=VALUE` override.
 #[derive(Debug, Clone)]
 pub struct Override {
@@ -26,17 +97,15 @@ pub struct Override {
 }
 
 impl FromStr for Override {
-    type Err = String;
+    type Err = OverrideError;
 
     /// VALUE is a TOML value (`4`, `0.5`, `true`, `"x"`, `[1, 2]`); anything
     /// that does not parse as one is taken as a string (`log=data/a.clf`).
-    fn from_str(s: &str) -> Result<Self, String> {
-        let (path, raw) = s
-            .split_once('=')
-            .ok_or_else(|| format!("--set {s}: expected PATH=VALUE, e.g. matcher.parallelism=4"))?;
+    fn from_str(s: &str) -> Result<Self, OverrideError> {
+        let (path, raw) = s.split_once('=').ok_or_else(|| OverrideError::NoEquals(s.to_string()))?;
         let path: Vec<String> = path.trim().split('.').map(str::to_string).collect();
         if path.len() < 2 || path.iter().any(String::is_empty) {
-            return Err(format!("--set {s}: PATH must be COMPONENT.KEY[.KEY...] or topology.KEY"));
+            return Err(OverrideError::BadPath(s.to_string()));
         }
         let raw = raw.trim();
         let value = raw.parse::<Value>().unwrap_or_else(|_| Value::from(raw));
@@ -51,20 +120,20 @@ impl fmt::Display for Override {
 }
 
 /// Applies the overrides to the topology text and returns the new text.
-pub(crate) fn apply(text: &str, overrides: &[Override]) -> Result<String, String> {
-    let mut doc = DocumentMut::from_str(text).map_err(|e| format!("not valid TOML: {e}"))?;
+pub(crate) fn apply(text: &str, overrides: &[Override]) -> Result<String, OverrideError> {
+    let mut doc = DocumentMut::from_str(text).map_err(|e| OverrideError::NotToml(e.to_string()))?;
     for o in overrides {
-        apply_one(&mut doc, o).map_err(|why| format!("--set {}: {why}", o.text))?;
+        apply_one(&mut doc, o).map_err(|problem| OverrideError::Misfit { set: o.text.clone(), problem })?;
     }
     Ok(doc.to_string())
 }
 
-fn apply_one(doc: &mut DocumentMut, o: &Override) -> Result<(), String> {
+fn apply_one(doc: &mut DocumentMut, o: &Override) -> Result<(), Misfit> {
     let head = o.path[0].as_str();
     let rest = &o.path[1..];
     if head == "topology" {
         check_key(&rest[0], TOPOLOGY_KEYS, "[topology]")?;
-        let table = doc.get_mut("topology").ok_or("the file has no [topology] table")?;
+        let table = doc.get_mut("topology").ok_or(Misfit::NoTopologyTable)?;
         return set_in_item(table, rest, o.value.clone(), false);
     }
     check_key(&rest[0], COMPONENT_KEYS, &format!("component \"{head}\""))?;
@@ -72,15 +141,19 @@ fn apply_one(doc: &mut DocumentMut, o: &Override) -> Result<(), String> {
     set_in_table(component, rest, o.value.clone(), false)
 }
 
-fn check_key(key: &str, allowed: &[&str], what: &str) -> Result<(), String> {
+fn check_key(key: &str, allowed: &[&str], place: &str) -> Result<(), Misfit> {
     if allowed.contains(&key) {
         Ok(())
     } else {
-        Err(format!("unknown key \"{key}\" for {what} (expected one of {})", allowed.join(", ")))
+        Err(Misfit::UnknownKey {
+            key: key.to_string(),
+            place: place.to_string(),
+            expected: allowed.join(", "),
+        })
     }
 }
 
-fn find_component<'d>(doc: &'d mut DocumentMut, name: &str) -> Result<&'d mut toml_edit::Table, String> {
+fn find_component<'d>(doc: &'d mut DocumentMut, name: &str) -> Result<&'d mut toml_edit::Table, Misfit> {
     let mut names = Vec::new();
     let mut found = None;
     for section in ["spout", "bolt"] {
@@ -96,7 +169,7 @@ fn find_component<'d>(doc: &'d mut DocumentMut, name: &str) -> Result<&'d mut to
         }
     }
     let (section, index) =
-        found.ok_or_else(|| format!("no component named \"{name}\" (components: {})", names.join(", ")))?;
+        found.ok_or_else(|| Misfit::NoComponent { name: name.to_string(), components: names.join(", ") })?;
     let table = doc
         .get_mut(section)
         .and_then(Item::as_array_of_tables_mut)
@@ -113,7 +186,7 @@ fn set_in_table(
     path: &[String],
     value: Value,
     in_params: bool,
-) -> Result<(), String> {
+) -> Result<(), Misfit> {
     let key = path[0].as_str();
     let in_params = in_params || key == "params";
     if path.len() == 1 {
@@ -127,7 +200,7 @@ fn set_in_table(
     }
     if table.get(key).is_none() {
         if !in_params {
-            return Err(format!("\"{key}\" is not set in the file, so nothing below it can be set"));
+            return Err(Misfit::NotSet(key.to_string()));
         }
         table.insert(key, Item::Value(Value::InlineTable(Default::default())));
     }
@@ -135,7 +208,7 @@ fn set_in_table(
     set_in_item(child, &path[1..], value, in_params)
 }
 
-fn set_in_item(item: &mut Item, path: &[String], value: Value, in_params: bool) -> Result<(), String> {
+fn set_in_item(item: &mut Item, path: &[String], value: Value, in_params: bool) -> Result<(), Misfit> {
     match item {
         Item::Value(v) => set_in_value(v, path, value, in_params),
         Item::Table(t) => set_in_table(t, path, value, in_params),
@@ -143,15 +216,15 @@ fn set_in_item(item: &mut Item, path: &[String], value: Value, in_params: bool) 
             let index = parse_index(&path[0], tables.len())?;
             let table = tables.get_mut(index).expect("index checked");
             if path.len() == 1 {
-                return Err("a whole table cannot be replaced; set its keys".to_string());
+                return Err(Misfit::WholeTable);
             }
             set_in_table(table, &path[1..], value, in_params)
         }
-        Item::None => Err(format!("\"{}\" is below an empty item", path[0])),
+        Item::None => Err(Misfit::BelowEmpty(path[0].clone())),
     }
 }
 
-fn set_in_value(slot: &mut Value, path: &[String], value: Value, in_params: bool) -> Result<(), String> {
+fn set_in_value(slot: &mut Value, path: &[String], value: Value, in_params: bool) -> Result<(), Misfit> {
     match slot {
         Value::Array(array) => {
             let index = parse_index(&path[0], array.len())?;
@@ -166,17 +239,13 @@ fn set_in_value(slot: &mut Value, path: &[String], value: Value, in_params: bool
             set_in_value(element, &path[1..], value, in_params)
         }
         Value::InlineTable(table) => set_in_table(table, path, value, in_params),
-        _ => Err(format!("\"{}\" is below a value that is not a table or list", path[0])),
+        _ => Err(Misfit::BelowValue(path[0].clone())),
     }
 }
 
-fn parse_index(segment: &str, len: usize) -> Result<usize, String> {
-    let index: usize = segment.parse().map_err(|_| format!("\"{segment}\" must be an index into a list"))?;
-    if index < len {
-        Ok(index)
-    } else {
-        Err(format!("index {index} is out of range (the list has {len} entries)"))
-    }
+fn parse_index(segment: &str, len: usize) -> Result<usize, Misfit> {
+    let index: usize = segment.parse().map_err(|_| Misfit::NotAnIndex(segment.to_string()))?;
+    if index < len { Ok(index) } else { Err(Misfit::OutOfRange { index, len }) }
 }
 
 #[cfg(test)]
@@ -199,7 +268,7 @@ inputs = [ { from = "src", queue = 4 } ]
 
     fn set(sets: &[&str]) -> Result<String, String> {
         let overrides: Vec<Override> = sets.iter().map(|s| s.parse().unwrap()).collect();
-        apply(TEXT, &overrides)
+        apply(TEXT, &overrides).map_err(|e| e.to_string())
     }
 
     #[test]

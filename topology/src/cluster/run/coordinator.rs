@@ -534,7 +534,7 @@ impl Hosts for &mut ClusterHosts<'_> {
             tasks.iter().enumerate().map(|(i, &(c, t))| (c, t, survivors[i % survivors.len()])).collect();
         let wire = moves.iter().map(|&(c, t, h)| (c as u32, t as u32, h)).collect();
         send_control(self.session, &self.control, Control::Reassign { lost: host, moves: wire })
-            .map_err(lost_at)?;
+            .map_err(|e| lost_at(e.to_string()))?;
         self.local.reassign(self.topology, self.options, &self.events, &moves).map_err(|e| {
             lost_at(format!("failed: cannot start it again in the coordinator's process: {e}"))
         })?;

@@ -12,6 +12,7 @@ use std::time::Duration;
 use zenoh::Session;
 use zenoh::Wait;
 
+use crate::cluster::HostError;
 use crate::cluster::run::layout::Layout;
 use crate::cluster::run::link::{Inbound, Link, data_key};
 use crate::metrics::TaskOutcome;
@@ -59,8 +60,9 @@ impl HostRun {
         prefix: &str,
         (host, host_count): (u16, usize),
         options: &RunOptions,
-    ) -> Result<Self, String> {
-        let runtime = io_runtime().map_err(|e| format!("cannot start the runtime: {e}"))?;
+    ) -> Result<Self, HostError> {
+        let runtime =
+            io_runtime().map_err(|source| HostError::Os { doing: "cannot start the runtime", source })?;
         let link = Arc::new(Link::open(session, prefix, layout.clone(), host, host_count)?);
         let wiring = Wiring::build(topology, options, &elsewhere(&link, host));
         let inbound = Arc::new(Inbound::default());
@@ -74,7 +76,7 @@ impl HostRun {
             .declare_subscriber(data_key(prefix, host))
             .callback(move |sample| l.on_frame(&sample.payload().to_bytes(), &i))
             .wait()
-            .map_err(|e| format!("cannot subscribe to this host's tuples: {e}"))?;
+            .map_err(|e| HostError::transport("cannot subscribe to this host's tuples", e))?;
         let threads = layout.hosts().iter().map(|tasks| tasks.iter().map(|_| None).collect()).collect();
         Ok(HostRun {
             host,
@@ -99,7 +101,7 @@ impl HostRun {
         topology: &Topology,
         options: &RunOptions,
         events: &mpsc::Sender<Event>,
-    ) -> Result<(), String> {
+    ) -> Result<(), HostError> {
         let waited = self.link.wait_until_heard(HEARD)?;
         tracing::debug!("host {}: heard every host after {:.1} ms", self.host, waited.as_secs_f64() * 1e3);
         let (layout, host) = (self.layout.clone(), self.host);
@@ -107,7 +109,7 @@ impl HostRun {
         self.threads = spawn_tasks(topology, &mut self.wiring, options, &runtime, events, &|c, t| {
             layout.host(c, t) == host
         })
-        .map_err(|e| format!("cannot start tasks: {e}"))?;
+        .map_err(|source| HostError::Os { doing: "cannot start tasks", source })?;
         Ok(())
     }
 

@@ -4,6 +4,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU16, Ordering};
 
+use crate::cluster::PlacementError;
 use crate::grouping::OverflowPolicy;
 use crate::message::MessageType;
 use crate::plan::Topology;
@@ -40,32 +41,35 @@ pub(crate) struct Layout {
 impl Layout {
     /// The layout of `topology` with task t of component c on
     /// `hosts[c][t]`; an error if the table does not fit the topology.
-    pub(crate) fn new(topology: &Topology, hosts: Vec<Vec<u16>>, host_count: usize) -> Result<Self, String> {
+    pub(crate) fn new(
+        topology: &Topology,
+        hosts: Vec<Vec<u16>>,
+        host_count: usize,
+    ) -> Result<Self, PlacementError> {
         let comps = &topology.components;
         if hosts.len() != comps.len() {
-            return Err(format!(
-                "placement for {} components, the topology has {}",
-                hosts.len(),
-                comps.len()
-            ));
+            return Err(PlacementError::Components { given: hosts.len(), expected: comps.len() });
         }
         for (c, h) in comps.iter().zip(&hosts) {
             if h.len() != c.spec.parallelism {
-                return Err(format!(
-                    "placement of \"{}\" has {} tasks, the topology {}",
-                    c.spec.name,
-                    h.len(),
-                    c.spec.parallelism
-                ));
+                return Err(PlacementError::Tasks {
+                    component: c.spec.name.clone(),
+                    given: h.len(),
+                    expected: c.spec.parallelism,
+                });
             }
             if let Some(bad) = h.iter().find(|&&x| usize::from(x) >= host_count) {
-                return Err(format!("placement of \"{}\" names host {bad} of {host_count}", c.spec.name));
+                return Err(PlacementError::Host {
+                    component: c.spec.name.clone(),
+                    host: *bad,
+                    hosts: host_count,
+                });
             }
         }
         let mut offsets = Vec::with_capacity(comps.len());
         let mut edges = Vec::new();
         for (ci, consumer) in comps.iter().enumerate() {
-            offsets.push(u32::try_from(edges.len()).map_err(|_| "too many edges")?);
+            offsets.push(u32::try_from(edges.len()).map_err(|_| PlacementError::TooManyEdges)?);
             for (slot, input) in consumer.spec.inputs.iter().enumerate() {
                 let producer = comps
                     .iter()

@@ -33,6 +33,7 @@ use zenoh::Wait;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 
+use crate::cluster::HostError;
 use crate::cluster::run::layout::Layout;
 use crate::cluster::wire::{DEFAULT_MAX_FRAME, EdgeTraffic, Frame, Rejections, WireError};
 use crate::error::EmitError;
@@ -100,14 +101,14 @@ impl Link {
         layout: Arc<Layout>,
         host: u16,
         host_count: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, HostError> {
         let mut publishers = Vec::with_capacity(host_count);
         for h in 0..host_count as u16 {
             let publisher = session
                 .declare_publisher(data_key(prefix, h))
                 .congestion_control(CongestionControl::Block)
                 .wait()
-                .map_err(|e| format!("cannot publish to host {h}: {e}"))?;
+                .map_err(|e| HostError::transport(format!("cannot publish to host {h}"), e))?;
             publishers.push(publisher);
         }
         let traffic = layout.edges.iter().map(|_| EdgeCounters::default()).collect();
@@ -132,20 +133,20 @@ impl Link {
     /// subscription arrives only once the two workers have linked up (gossip
     /// tells them of each other after the coordinator connects to both):
     /// a tuple sent before that would be lost without a trace.
-    pub(crate) fn wait_until_heard(&self, limit: Duration) -> Result<Duration, String> {
+    pub(crate) fn wait_until_heard(&self, limit: Duration) -> Result<Duration, HostError> {
         let started = Instant::now();
         for (host, publisher) in self.publishers.iter().enumerate() {
             loop {
-                let heard = publisher.matching_status().wait().map_err(|e| e.to_string())?.matching();
+                let heard = publisher
+                    .matching_status()
+                    .wait()
+                    .map_err(|e| HostError::Zenoh(e.to_string()))?
+                    .matching();
                 if heard {
                     break;
                 }
                 if started.elapsed() > limit {
-                    return Err(format!(
-                        "host {} never heard from host {host} within {} s: can the workers reach each other?",
-                        self.host,
-                        limit.as_secs()
-                    ));
+                    return Err(HostError::Unheard { host: self.host, other: host, secs: limit.as_secs() });
                 }
                 std::thread::sleep(Duration::from_millis(2));
             }
@@ -220,9 +221,9 @@ impl Link {
         }
     }
 
-    async fn publish(&self, host: u16, bytes: Vec<u8>) -> Result<(), String> {
-        let publisher = self.publishers.get(usize::from(host)).ok_or("no such host")?;
-        publisher.put(bytes).await.map_err(|e| e.to_string())
+    async fn publish(&self, host: u16, bytes: Vec<u8>) -> Result<(), HostError> {
+        let publisher = self.publishers.get(usize::from(host)).ok_or(HostError::NoSuchHost)?;
+        publisher.put(bytes).await.map_err(|e| HostError::Zenoh(e.to_string()))
     }
 
     /// Handles a frame that arrived on this host's data key: a tuple goes
@@ -233,7 +234,7 @@ impl Link {
             Ok(Frame::Tuple { sender, edge, from, to, payload }) => {
                 if let Err(why) = self.accept(sender, (edge, from, to), &payload, inbound) {
                     tracing::warn!("host {}: refused a tuple on edge {edge}: {why}", self.host);
-                    self.rejections.count(&WireError::Malformed(why));
+                    self.rejections.count(&why);
                     // The sender counted it; refused, it is still received.
                     if let Some(c) = self.received_from.get(usize::from(sender)) {
                         c.fetch_add(1, Ordering::SeqCst);
@@ -254,28 +255,32 @@ impl Link {
         }
     }
 
-    fn accept(&self, sender: u16, pair: Pair, payload: &[u8], inbound: &Inbound) -> Result<(), String> {
+    /// Decodes a tuple and hands it to its queue's forwarder; the error
+    /// says why the frame is refused.
+    fn accept(&self, sender: u16, pair: Pair, payload: &[u8], inbound: &Inbound) -> Result<(), WireError> {
+        let refused = |why: &str| WireError::Malformed(why.to_string());
         let (edge, from, to) = pair;
         if usize::from(sender) >= self.received_from.len() {
-            return Err(format!("from host {sender}, which is not in the run"));
+            return Err(refused(&format!("from host {sender}, which is not in the run")));
         }
-        let info = self.layout.edges.get(edge as usize).ok_or("no such edge")?;
-        let source = *info.sources.get(from as usize).ok_or("no such sending task")?;
+        let info = self.layout.edges.get(edge as usize).ok_or_else(|| refused("no such edge"))?;
+        let source = *info.sources.get(from as usize).ok_or_else(|| refused("no such sending task"))?;
         let forward = inbound
             .forwarder(edge, to)
-            .ok_or_else(|| format!("task {to} of the consumer is not on this host"))?;
+            .ok_or_else(|| refused(&format!("task {to} of the consumer is not on this host")))?;
         let started = Instant::now();
         let decoded = match info.message.incremental_codec() {
             None => info.message.decode(payload).map_err(|e| e.to_string()),
             Some(codec) => {
                 let mut held = lock(&self.held);
                 (codec.decode)(payload, held.entry(pair).or_insert_with(codec.new_held))
+                    .map_err(|e| e.to_string())
             }
         }
-        .map_err(|e| format!("payload does not decode: {e}"));
+        .map_err(|e| refused(&format!("payload does not decode: {e}")));
         self.traffic[edge as usize].decode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
         let tuple = Tuple { source, payload: decoded?, anchor: None };
-        forward.send(Forwarded { tuple, sender, from }).map_err(|_| "the run is over".to_string())
+        forward.send(Forwarded { tuple, sender, from }).map_err(|_| refused("the run is over"))
     }
 }
 
@@ -304,6 +309,7 @@ impl RemoteTarget {
             Some(codec) => {
                 let mut records = lock(&link.sent_records);
                 (codec.encode)(&*tuple.payload, records.entry(self.pair).or_insert_with(codec.new_sent))
+                    .map_err(|e| e.to_string())
             }
         }
         .map_err(EmitError::Transport)?;
@@ -320,7 +326,7 @@ impl RemoteTarget {
         // Counted before it can arrive, so no look at the totals sees it
         // received but not sent.
         link.sent_to[usize::from(host)].fetch_add(1, Ordering::SeqCst);
-        link.publish(host, frame).await.map_err(EmitError::Transport)
+        link.publish(host, frame).await.map_err(|e| EmitError::Transport(e.to_string()))
     }
 }
 

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use zenoh::Session;
 use zenoh::Wait;
 
+use crate::cluster::HostError;
 use crate::cluster::run::host::HostRun;
 use crate::cluster::run::layout::Layout;
 use crate::cluster::session::send_control;
@@ -33,8 +34,8 @@ pub struct Hosted {
     pub aborted: bool,
 }
 
-fn put(session: &Session, key: &str, control: Control) -> Result<(), String> {
-    send_control(session, key, control).map_err(|e| format!("cannot reach the coordinator: {e}"))
+fn put(session: &Session, key: &str, control: Control) -> Result<(), HostError> {
+    send_control(session, key, control).map_err(|e| HostError::transport("cannot reach the coordinator", e))
 }
 
 /// Hosts `plan` on this worker until the coordinator collects it; answers
@@ -49,10 +50,11 @@ pub fn host_run(
     reply_key: &str,
     options: &RunOptions,
     release: &dyn Fn(&str),
-) -> Result<Hosted, String> {
-    let refuse = |reason: String| {
+) -> Result<Hosted, HostError> {
+    let refuse = |reason: HostError| {
         release(&plan.coordinator);
-        let _ = put(session, reply_key, Control::Refused { run: plan.run.clone(), reason: reason.clone() });
+        let _ =
+            put(session, reply_key, Control::Refused { run: plan.run.clone(), reason: reason.to_string() });
         reason
     };
     let (topology, control, mut host) = prepare(session, plan, registry, options).map_err(refuse)?;
@@ -71,7 +73,7 @@ pub fn host_run(
             .flat_map(|c| (0..layout.tasks(c)).map(move |t| (c, t)))
             .find(|&(c, t)| layout.host(c, t) == plan.host);
         if let Some((c, t)) = here {
-            let failed = TaskEvent::Failed(e.clone());
+            let failed = TaskEvent::Failed(e.to_string());
             put(session, &report_key, Control::Event { component: c as u32, task: t as u32, event: failed })?;
         }
         return Err(e);
@@ -89,15 +91,15 @@ fn prepare(
     plan: &RunPlan,
     registry: &Registry,
     options: &RunOptions,
-) -> Result<(Topology, ControlInbox, HostRun), String> {
+) -> Result<(Topology, ControlInbox, HostRun), HostError> {
     let topology = TopologySpec::parse(&plan.file, &plan.topology)
         .and_then(|spec| Topology::validate(spec, registry))
-        .map_err(|e| format!("the topology does not validate here: {e}"))?;
+        .map_err(HostError::Invalid)?;
     let layout = Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(plan.host_count))?);
     let subscriber = session
         .declare_subscriber(plan.control_key())
         .wait()
-        .map_err(|e| format!("cannot subscribe to run control: {e}"))?;
+        .map_err(|e| HostError::transport("cannot subscribe to run control", e))?;
     let control = ControlInbox { subscriber, refused: Rejections::default() };
     let hosts = (plan.host, usize::from(plan.host_count));
     let host = HostRun::build(&topology, layout, session, &plan.run, hosts, options)?;
@@ -113,7 +115,7 @@ struct ControlInbox {
 
 impl ControlInbox {
     /// The next control message within `wait`, if any.
-    fn next(&self, wait: Duration) -> Result<Option<Control>, String> {
+    fn next(&self, wait: Duration) -> Result<Option<Control>, HostError> {
         match self.subscriber.recv_timeout(wait) {
             Ok(Some(sample)) => match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
                 Ok(Frame::Control(c)) => Ok(Some(c)),
@@ -125,19 +127,19 @@ impl ControlInbox {
                 }
             },
             Ok(None) => Ok(None),
-            Err(e) => Err(format!("run control closed: {e}")),
+            Err(e) => Err(HostError::ControlClosed(e.to_string())),
         }
     }
 
     /// Waits (at most `PATIENCE`) for `Go`: true once it comes, false if
     /// the run is aborted first. Stages may not come before it.
-    fn wait_for_go(&self) -> Result<bool, String> {
+    fn wait_for_go(&self) -> Result<bool, HostError> {
         let deadline = Instant::now() + PATIENCE;
         loop {
             match self.next(Duration::from_millis(50))? {
                 Some(Control::Go) => return Ok(true),
                 Some(Control::Advance { stage, .. }) if stage == Stage::Abort as u8 => return Ok(false),
-                _ if Instant::now() > deadline => return Err("no Go from the coordinator".into()),
+                _ if Instant::now() > deadline => return Err(HostError::NoGo),
                 _ => {}
             }
         }
@@ -162,7 +164,7 @@ impl Following<'_> {
         control: &ControlInbox,
         events_tx: &mpsc::Sender<Event>,
         events: &mpsc::Receiver<Event>,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, HostError> {
         let mut aborted = false;
         loop {
             while let Ok(Event { component, task, kind }) = events.try_recv() {
@@ -187,9 +189,9 @@ impl Following<'_> {
                 Some(Control::Status { nonce }) => put(self.session, &self.report_key, self.totals(nonce))?,
                 Some(Control::Reassign { moves, .. }) => {
                     let moves = checked_moves(self.topology, &moves, self.plan.host_count);
-                    self.host
-                        .reassign(self.topology, self.options, events_tx, &moves)
-                        .map_err(|e| format!("cannot start a task moved here: {e}"))?;
+                    self.host.reassign(self.topology, self.options, events_tx, &moves).map_err(|source| {
+                        HostError::Os { doing: "cannot start a task moved here", source }
+                    })?;
                 }
                 Some(Control::Collect) => return Ok(aborted),
                 Some(_) | None => {}
@@ -223,7 +225,7 @@ impl Following<'_> {
         control: &ControlInbox,
         aborted: bool,
         release: &dyn Fn(&str),
-    ) -> Result<usize, String> {
+    ) -> Result<usize, HostError> {
         // Every task has exited when the coordinator collects (after an
         // abort, those still running after the grace are left behind).
         let tasks = self.host.join(!aborted);
