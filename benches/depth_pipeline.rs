@@ -43,7 +43,8 @@ fn main() {
     let options =
         LocalizeOptions { particles: 50, init: Init::Known(frames[0].2), ..LocalizeOptions::default() };
     let mut filter =
-        Filter::new(CgrModel::new(map.clone(), Some(Arc::new(grid)), options).expect("valid"), 1, 1);
+        Filter::new(CgrModel::new(map.clone(), Some(Arc::new(grid)), options).expect("valid"), 1, 1)
+            .expect("one task");
     let mut fspf = PlaneFilter::new(FspfOptions::default(), camera.intrinsics);
     let (mut planes, mut rng) = (PlaneFiltered::default(), ChaCha8Rng::seed_from_u64(2));
     let (mut total, mut fspf_ms, mut points) = (Vec::new(), Vec::new(), Vec::new());

@@ -45,7 +45,7 @@ fn main() {
     let cut = LineMap { walls: map.walls.iter().copied().filter(|w| inside(w.a) && inside(w.b)).collect() };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let started = Instant::now();
-    let grid = SceneGrid::build(&cut, 0.2, 8.0, threads);
+    let grid = SceneGrid::build(&cut, 0.2, 8.0, threads).expect("valid cell and range");
     let build = started.elapsed().as_secs_f64();
     let (w, h) = grid.size();
     let started = Instant::now();

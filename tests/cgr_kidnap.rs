@@ -50,8 +50,8 @@ fn kidnapped(world: &str, at: f64, skip: f64, particles: usize) -> (f64, Vec<f64
         injection: Some(Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1 }),
         ..LocalizeOptions::default()
     };
-    let grid = Arc::new(SceneGrid::build(&map, 0.2, 8.0, 2));
-    let mut filter = Filter::new(CgrModel::new(map, Some(grid), options).unwrap(), 11, 1);
+    let grid = Arc::new(SceneGrid::build(&map, 0.2, 8.0, 2).unwrap());
+    let mut filter = Filter::new(CgrModel::new(map, Some(grid), options).unwrap(), 11, 1).unwrap();
     let mut errors = Vec::new();
     for (i, (obs, truth)) in carried.iter().enumerate() {
         filter.process(obs);

@@ -26,8 +26,8 @@ fn track(shards: usize) -> (f64, f64, f64, Vec<Pose2>) {
     // Tracking: the particles start at the true first pose.
     let options = LocalizeOptions { init: Init::Known(events[0].1), ..LocalizeOptions::default() };
     // Scenes precomputed on a 0.2 m grid, as a run would load them.
-    let grid = Arc::new(SceneGrid::build(&map, 0.2, 8.0, 2));
-    let mut filter = Filter::new(CgrModel::new(map, Some(grid), options).unwrap(), 11, shards);
+    let grid = Arc::new(SceneGrid::build(&map, 0.2, 8.0, 2).unwrap());
+    let mut filter = Filter::new(CgrModel::new(map, Some(grid), options).unwrap(), 11, shards).unwrap();
     let (mut sum, mut max, mut heading, mut n) = (0.0, 0.0f64, 0.0, 0.0);
     let mut poses = Vec::new();
     for (obs, truth) in &events {

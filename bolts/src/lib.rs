@@ -5,12 +5,15 @@
 //! return values, so they can be tested, benchmarked and reused alone.
 
 pub mod cgr;
+mod error;
 pub mod parfil;
 pub mod pf;
 pub mod sinks;
 pub mod slam;
 
 use squall_topology::Registry;
+
+pub use error::{Error, Result};
 
 /// Registers every kind this crate provides: the particle filter kinds with
 /// their three models (`slam`, `parfil`, `cgr`, in that order), the

@@ -3,6 +3,7 @@
 //! resampling, measurement and motion settings, where precomputed scenes
 //! are cached), and the registration of the localization kinds.
 
+use crate::Error;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -33,7 +34,7 @@ pub fn register(r: &mut Registry) {
 impl HostedModel for CgrModel {
     type Snapshot = Pose2;
 
-    fn from_table(table: toml::Table) -> Result<Self, String> {
+    fn from_table(table: toml::Table) -> crate::Result<Self> {
         cgr_model(table)
     }
 
@@ -123,17 +124,16 @@ fn shared_grid(
     cell: Real,
     range: Real,
     dir: &std::path::Path,
-) -> Result<Arc<SceneGrid>, String> {
+) -> crate::Result<Arc<SceneGrid>> {
     static GRIDS: OnceLock<Mutex<HashMap<u64, Arc<SceneGrid>>>> = OnceLock::new();
     let grids = GRIDS.get_or_init(Default::default);
-    let mut grids = grids.lock().map_err(|_| "the scene grid cache was poisoned".to_string())?;
+    let mut grids = grids.lock().map_err(|_| Error::CachePoisoned)?;
     let key = SceneGrid::key(map, cell, range);
     if let Some(g) = grids.get(&key) {
         return Ok(g.clone());
     }
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let (grid, built) =
-        SceneGrid::load_or_build(map, cell, range, threads, dir).map_err(|e| e.to_string())?;
+    let (grid, built) = SceneGrid::load_or_build(map, cell, range, threads, dir)?;
     if built {
         tracing::info!("observable scenes precomputed and cached in {}", dir.display());
     }
@@ -144,16 +144,18 @@ fn shared_grid(
 
 /// The `cgr` model from the matcher's params (without `model` and
 /// `map_interval`).
-pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
+pub fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
     let p: CgrParams = from_table(table)?;
     if p.map.as_os_str().is_empty() {
-        return Err("`map` (a line-map file) is required".into());
+        return Err(Error::Setting("`map` (a line-map file) is required".into()));
     }
     let init = match (p.init.as_str(), p.start) {
         ("global", _) => Init::Global,
         ("known", Some([x, y, theta])) => Init::Known(Pose2::new(x, y, theta)),
-        ("known", None) => return Err("init = \"known\" needs start = [x, y, theta]".into()),
-        (other, _) => return Err(format!("init must be \"known\" or \"global\", got \"{other}\"")),
+        ("known", None) => return Err(Error::Setting("init = \"known\" needs start = [x, y, theta]".into())),
+        (other, _) => {
+            return Err(Error::Setting(format!("init must be \"known\" or \"global\", got \"{other}\"")));
+        }
     };
     let cgr = CgrOptions {
         sigma: p.sigma,
@@ -164,17 +166,17 @@ pub fn cgr_model(table: toml::Table) -> Result<CgrModel, String> {
         outlier_sigmas: p.outlier_sigmas,
     };
     cgr.check()?;
-    if !(p.cell.is_finite() && p.cell > 0.0) {
-        return Err(format!("cell must be > 0, got {}", p.cell));
-    }
-    let map = Arc::new(LineMap::load(&p.map).map_err(|e| e.to_string())?);
+    crate::error::positive("cell", p.cell)?;
+    let map = Arc::new(LineMap::load(&p.map)?);
     let scenes = match p.scenes.as_str() {
         "on_demand" => None,
         "grid" => {
             let dir = p.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("squall-scenes"));
             Some(shared_grid(&map, p.cell, p.range, &dir)?)
         }
-        other => return Err(format!("scenes must be \"grid\" or \"on_demand\", got \"{other}\"")),
+        other => {
+            return Err(Error::Setting(format!("scenes must be \"grid\" or \"on_demand\", got \"{other}\"")));
+        }
     };
     let options = LocalizeOptions {
         particles: p.particles,

@@ -54,22 +54,22 @@ impl Default for CgrOptions {
 
 impl CgrOptions {
     /// Checks every range; says which setting is wrong.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> crate::Result<()> {
         for (name, v) in [
             ("sigma", self.sigma),
             ("correlation", self.correlation),
             ("range", self.range),
             ("outlier_sigmas", self.outlier_sigmas),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be > 0, got {v}"));
-            }
+            crate::error::positive(name, v)?;
         }
         if !(0.0..=90.0).contains(&self.normal_tolerance_deg) {
-            return Err(format!(
-                "normal_tolerance_deg must be in [0, 90], got {}",
-                self.normal_tolerance_deg
-            ));
+            let found = self.normal_tolerance_deg;
+            return Err(crate::Error::OutOfRange {
+                name: "normal_tolerance_deg",
+                expected: "in [0, 90]",
+                found,
+            });
         }
         Ok(())
     }

@@ -89,20 +89,25 @@ impl CgrModel {
         map: Arc<LineMap>,
         scenes: Option<Arc<SceneGrid>>,
         options: LocalizeOptions,
-    ) -> Result<Self, String> {
+    ) -> crate::Result<Self> {
         options.cgr.check()?;
         if options.particles == 0 {
-            return Err("particles must be at least 1".into());
+            return Err(crate::Error::Setting("particles must be at least 1".into()));
         }
         if let Some(i) = options.injection {
             if !(0.0 < i.alpha_slow && i.alpha_slow < i.alpha_fast && i.alpha_fast <= 1.0) {
-                return Err(format!(
+                return Err(crate::Error::Setting(format!(
                     "injection rates must satisfy 0 < alpha_slow < alpha_fast ≤ 1, got {} and {}",
                     i.alpha_slow, i.alpha_fast
-                ));
+                )));
             }
             if !(i.min_drop >= 0.0 && i.min_drop.is_finite()) {
-                return Err(format!("min_drop must be a finite number ≥ 0, got {}", i.min_drop));
+                let found = i.min_drop;
+                return Err(crate::Error::OutOfRange {
+                    name: "min_drop",
+                    expected: "a finite number ≥ 0",
+                    found,
+                });
             }
         }
         let wall_lengths = map

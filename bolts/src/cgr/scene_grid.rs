@@ -16,18 +16,7 @@ use squall_topology::hash::Fnv1a;
 /// Bumped whenever the file layout or the scene algorithm changes.
 const FORMAT: u64 = 3;
 
-/// Why a cached grid could not be used or written.
-#[derive(Debug, thiserror::Error)]
-pub enum SceneCacheError {
-    /// The cache file could not be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What went wrong.
-        source: std::io::Error,
-    },
-}
+pub use crate::error::SceneCacheError;
 
 /// Visible walls for every cell of a grid over the map.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -48,8 +37,10 @@ impl SceneGrid {
     /// the map's bounding box, walls up to `range` metres, on `threads`
     /// threads; a cell within 1.5 cells of a wall keeps the union of its
     /// 3 × 3 block's scenes.
-    pub fn build(map: &LineMap, cell: Real, range: Real, threads: usize) -> Self {
-        assert!(cell > 0.0 && range > 0.0, "cell size and range must be positive");
+    /// An error if `cell` or `range` is not a positive number of metres.
+    pub fn build(map: &LineMap, cell: Real, range: Real, threads: usize) -> crate::Result<Self> {
+        crate::error::positive("cell", cell)?;
+        crate::error::positive("range", range)?;
         let (x0, y0, x1, y1) = map.bounds();
         let width = (((x1 - x0) / cell).ceil() as usize).max(1);
         let height = (((y1 - y0) / cell).ceil() as usize).max(1);
@@ -115,7 +106,7 @@ impl SceneGrid {
                 offsets.push(lines.len() as u32);
             }
         }
-        SceneGrid {
+        Ok(SceneGrid {
             key: Self::key(map, cell, range),
             origin: (x0, y0),
             cell,
@@ -124,7 +115,7 @@ impl SceneGrid {
             height,
             offsets,
             lines,
-        }
+        })
     }
 
     /// A hash of the map and the grid settings, stable across runs and
@@ -156,7 +147,7 @@ impl SceneGrid {
         range: Real,
         threads: usize,
         dir: &Path,
-    ) -> Result<(Self, bool), SceneCacheError> {
+    ) -> crate::Result<(Self, bool)> {
         let path = Self::cache_path(dir, map, cell, range);
         if let Ok(bytes) = std::fs::read(&path) {
             if let Ok(grid) = postcard::from_bytes::<SceneGrid>(&bytes) {
@@ -168,7 +159,7 @@ impl SceneGrid {
             }
             tracing::warn!("{}: not a usable scene cache; rebuilding it", path.display());
         }
-        let grid = Self::build(map, cell, range, threads);
+        let grid = Self::build(map, cell, range, threads)?;
         let bytes = postcard::to_allocvec(&grid).expect("a scene grid serializes");
         let io = |source| SceneCacheError::Io { path: path.clone(), source };
         std::fs::create_dir_all(dir).map_err(io)?;
@@ -210,7 +201,7 @@ mod tests {
     #[test]
     fn the_grid_holds_each_cells_scene() {
         let map = room();
-        let grid = SceneGrid::build(&map, 0.5, 20.0, 2);
+        let grid = SceneGrid::build(&map, 0.5, 20.0, 2).unwrap();
         assert_eq!(grid.size(), (20, 20));
         // Cells in the open keep their centre's scene; the last, in a
         // corner, is by a wall and keeps its 3 × 3 block's.
@@ -234,7 +225,7 @@ mod tests {
         // every wall is seen from somewhere.
         assert_eq!(grid.lines_at(5.0, 8.0).unwrap(), &[0, 1, 2, 3, 4]);
         assert_eq!(grid.lines_at(-1.0, 5.0), None);
-        assert_eq!(SceneGrid::build(&map, 0.5, 20.0, 1), grid, "threads do not change the grid");
+        assert_eq!(SceneGrid::build(&map, 0.5, 20.0, 1).unwrap(), grid, "threads do not change the grid");
     }
 
     #[test]
@@ -246,7 +237,7 @@ mod tests {
             "0,0,10,0\n10,0,10,10\n10,10,0,10\n0,10,0,0\n5.2,0,5.2,4\n5.2,6,5.2,10\n",
         )
         .unwrap();
-        let grid = SceneGrid::build(&map, 0.5, 20.0, 2);
+        let grid = SceneGrid::build(&map, 0.5, 20.0, 2).unwrap();
         // At (5.1, 3.9), left of the wall beside the jamb, the cell's
         // centre (5.25, 3.75) is right of the wall, in the other room; the
         // left room's far wall (x = 0) must still be in the scene.

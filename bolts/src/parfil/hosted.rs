@@ -9,7 +9,7 @@ use crate::pf::kinds::{HostedModel, from_table};
 impl HostedModel for ParfilModel {
     type Snapshot = Pose2;
 
-    fn from_table(table: toml::Table) -> Result<Self, String> {
+    fn from_table(table: toml::Table) -> crate::Result<Self> {
         ParfilModel::new(from_table::<ParfilOptions>(table)?)
     }
 

@@ -65,21 +65,17 @@ impl Default for ParfilOptions {
 
 impl ParfilOptions {
     /// Checks every range; says which setting is wrong.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> crate::Result<()> {
         if self.particles == 0 {
-            return Err("particles must be at least 1".into());
+            return Err(crate::Error::Setting("particles must be at least 1".into()));
         }
         for (name, v) in
             [("width", self.width), ("height", self.height), ("bearing_noise", self.bearing_noise)]
         {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be > 0, got {v}"));
-            }
+            crate::error::positive(name, v)?;
         }
         for (name, v) in [("forward_noise", self.forward_noise), ("turn_noise", self.turn_noise)] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{name} must be ≥ 0, got {v}"));
-            }
+            crate::error::non_negative(name, v)?;
         }
         Ok(())
     }
@@ -163,7 +159,7 @@ pub struct ParfilModel {
 
 impl ParfilModel {
     /// The model; errors name the wrong option.
-    pub fn new(options: ParfilOptions) -> Result<Self, String> {
+    pub fn new(options: ParfilOptions) -> crate::Result<Self> {
         options.check()?;
         Ok(ParfilModel { options })
     }
@@ -251,7 +247,7 @@ mod tests {
     fn final_error(scheme: Scheme, shards: usize) -> (Real, Pose2) {
         let options = ParfilOptions { particles: 2000, resampling: scheme, ..ParfilOptions::default() };
         let mut world = ParfilWorld::new(options.clone(), Pose2::new(30.0, 50.0, 0.5), 4);
-        let mut filter = Filter::new(ParfilModel::new(options).unwrap(), 9, shards);
+        let mut filter = Filter::new(ParfilModel::new(options).unwrap(), 9, shards).unwrap();
         filter.process(&ParfilReading {
             iteration: 0,
             forward: 0.0,

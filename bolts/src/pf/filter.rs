@@ -51,9 +51,11 @@ where
     M::Input: Clone,
 {
     /// A filter over `model` with its particles on `tasks` shards.
-    pub fn new(model: M, seed: u64, tasks: usize) -> Self {
-        assert!(tasks > 0, "at least one task");
-        Filter {
+    pub fn new(model: M, seed: u64, tasks: usize) -> crate::Result<Self> {
+        if tasks == 0 {
+            return Err(crate::Error::NoShards);
+        }
+        Ok(Filter {
             model,
             seed,
             tasks,
@@ -63,7 +65,7 @@ where
             last: None,
             gate: M::Gate::default(),
             step: 0,
-        }
+        })
     }
 
     /// The model.
@@ -115,15 +117,17 @@ where
         let population = self.population.as_mut().expect("started");
         let poses: Vec<(Pose2, Real)> = reports.iter().map(|r| (r.pose, r.log_likelihood)).collect();
         let fits: Vec<Real> = reports.iter().map(|r| r.fit).collect();
-        let decision = population.correct(
-            self.step,
-            model.mark(input),
-            &poses,
-            model.weight_smoothing(),
-            model.resample_threshold(),
-            model.resampling(),
-            model.injection().map(|i| (i, &fits[..])),
-        );
+        let decision = population
+            .correct(
+                self.step,
+                model.mark(input),
+                &poses,
+                model.weight_smoothing(),
+                model.resample_threshold(),
+                model.resampling(),
+                model.injection().map(|i| (i, &fits[..])),
+            )
+            .expect("the shards between them hold every slot once, so every particle reports");
         let parents = &decision.parents;
         // Without resampling every particle stays where it is.
         let (placed, moved_now) = if decision.resampled {

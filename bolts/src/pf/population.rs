@@ -101,8 +101,10 @@ impl Population {
         threshold: Real,
         scheme: Scheme,
         injection: Option<(Injection, &[Real])>,
-    ) -> Decision {
-        assert_eq!(reports.len(), self.len(), "one report per particle");
+    ) -> crate::Result<Decision> {
+        if reports.len() != self.len() {
+            return Err(crate::Error::ReportCount { particles: self.len(), reports: reports.len() });
+        }
         for (slot, &(_, l)) in reports.iter().enumerate() {
             self.log_weights[slot] += l;
             self.lineage_weights[slot] += l;
@@ -131,7 +133,7 @@ impl Population {
             Some((i, fits)) => self.fresh_slots(step, fits, i),
             None => Vec::new(),
         };
-        Decision { neff, parents, resampled, best: self.best(), weights, fresh }
+        Ok(Decision { neff, parents, resampled, best: self.best(), weights, fresh })
     }
 
     /// Updates augmented MCL's averages with this reading's best fit
@@ -230,7 +232,7 @@ mod tests {
         let mut p = Population::start(&[at(0.0); 4], 7, 0.0, at(0.0));
         let reports: Vec<(Pose2, Real)> =
             [(1.0, -900.0), (2.0, 0.0), (3.0, -900.0), (4.0, -900.0)].map(|(x, l)| (at(x), l)).to_vec();
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None);
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None).unwrap();
         assert!(d.resampled && d.neff < 2.0, "{d:?}");
         assert_eq!(d.parents, vec![1, 1, 1, 1]);
         assert_eq!(d.best, 3, "equal lineage weights: the last slot");
@@ -248,7 +250,8 @@ mod tests {
             .map(|(x, l)| (at(x), l))
             .to_vec();
         // An infinite threshold forces resampling, as after a loss.
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, Real::INFINITY, Scheme::LowVariance, None);
+        let d =
+            p.correct(1, (1.0, at(1.0)), &reports, 3.0, Real::INFINITY, Scheme::LowVariance, None).unwrap();
         assert!(d.resampled);
         assert!(!d.parents.contains(&3), "{:?}", d.parents);
         assert_eq!(d.weights[3], 0.0);
@@ -260,19 +263,21 @@ mod tests {
     fn without_resampling_weights_accumulate_and_slots_keep_their_parents() {
         let mut p = Population::start(&[at(0.0); 3], 7, 0.0, at(0.0));
         let reports = vec![(at(1.0), -1.0), (at(2.0), -1.1), (at(3.0), -1.2)];
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None);
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None).unwrap();
         assert!(!d.resampled);
         assert_eq!((d.parents, d.best), (vec![0, 1, 2], 0));
         assert_eq!(p.lineage_weight(2), -1.2);
-        let d = p.correct(
-            2,
-            (2.0, at(2.0)),
-            &[(at(1.0), -5.0), (at(2.0), 0.0), (at(3.0), 0.0)],
-            3.0,
-            0.5,
-            Scheme::LowVariance,
-            None,
-        );
+        let d = p
+            .correct(
+                2,
+                (2.0, at(2.0)),
+                &[(at(1.0), -5.0), (at(2.0), 0.0), (at(3.0), 0.0)],
+                3.0,
+                0.5,
+                Scheme::LowVariance,
+                None,
+            )
+            .unwrap();
         assert_eq!(d.best, 1);
     }
 
@@ -284,15 +289,17 @@ mod tests {
         for step in 1..=40 {
             // After step 10 all but a few particles fit badly.
             let fits: Vec<Real> = (0..100).map(|j| if step <= 10 || j < 5 { -0.05 } else { -0.9 }).collect();
-            let d = p.correct(
-                step,
-                (step as f64, at(0.0)),
-                &reports,
-                1.0 / 100.0,
-                0.5,
-                Scheme::LowVariance,
-                injection.map(|i| (i, &fits[..])),
-            );
+            let d = p
+                .correct(
+                    step,
+                    (step as f64, at(0.0)),
+                    &reports,
+                    1.0 / 100.0,
+                    0.5,
+                    Scheme::LowVariance,
+                    injection.map(|i| (i, &fits[..])),
+                )
+                .unwrap();
             assert!(d.fresh.is_empty(), "step {step}: {} injected", d.fresh.len());
         }
     }
@@ -313,6 +320,7 @@ mod tests {
                 Scheme::LowVariance,
                 injection.map(|i| (i, &fits[..])),
             )
+            .unwrap()
             .fresh
         };
         for step in 1..=20 {

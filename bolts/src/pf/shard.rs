@@ -154,7 +154,7 @@ impl<M: ParticleModel> Shard<M> {
         fresh: &[usize],
         holes: &[usize],
         incoming: impl IntoIterator<Item = (usize, M::State)>,
-    ) -> Result<(), String> {
+    ) -> crate::Result<()> {
         let mut received: Vec<(usize, Option<M::State>)> =
             incoming.into_iter().map(|(j, s)| (j, Some(s))).collect();
         received.sort_by_key(|r| r.0);
@@ -172,7 +172,7 @@ impl<M: ParticleModel> Shard<M> {
             match local(p) {
                 Some(i) => children[i] += 1,
                 None if received.binary_search_by_key(&j, |r| r.0).is_ok() => {}
-                None => return Err(format!("task {}: no state for new slot {j} (parent {p})", self.task)),
+                None => return Err(crate::Error::MissingState { task: self.task, slot: j, parent: p }),
             }
         }
         let (slots, mut old): (Vec<usize>, Vec<Option<M::State>>) =
@@ -312,7 +312,7 @@ mod tests {
     #[test]
     fn a_missing_transfer_is_an_error_naming_the_slot() {
         let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1], &vec![0.0], &0.0);
-        let e = shard.adopt(&Walk, 1, &1.0, &[0, 3], &[0, 0], &[], &[], Vec::new()).unwrap_err();
+        let e = shard.adopt(&Walk, 1, &1.0, &[0, 3], &[0, 0], &[], &[], Vec::new()).unwrap_err().to_string();
         assert!(e.contains("new slot 1") && e.contains("parent 3"), "{e}");
     }
 

@@ -29,17 +29,14 @@ pub struct Rbpf {
 
 impl Rbpf {
     /// A filter; errors name the wrong option.
-    pub fn new(options: SlamOptions, seed: u64) -> Result<Self, String> {
+    pub fn new(options: SlamOptions, seed: u64) -> crate::Result<Self> {
         Self::sharded(options, seed, 1)
     }
 
     /// A filter with its particles split over `shards` (the same results
     /// as one; this is how the parallel topology splits them).
-    pub fn sharded(options: SlamOptions, seed: u64, shards: usize) -> Result<Self, String> {
-        if shards == 0 {
-            return Err("at least one shard".into());
-        }
-        Ok(Rbpf { filter: Filter::new(SlamModel::new(options)?, seed, shards) })
+    pub fn sharded(options: SlamOptions, seed: u64, shards: usize) -> crate::Result<Self> {
+        Ok(Rbpf { filter: Filter::new(SlamModel::new(options)?, seed, shards)? })
     }
 
     /// Feeds one reading; `Some` when it was processed.
@@ -87,7 +84,7 @@ mod tests {
 
     #[test]
     fn bad_options_are_refused() {
-        let e = Rbpf::new(SlamOptions { particles: 0, ..SlamOptions::default() }, 1).unwrap_err();
+        let e = Rbpf::new(SlamOptions { particles: 0, ..SlamOptions::default() }, 1).unwrap_err().to_string();
         assert!(e.contains("particles"), "{e}");
         assert!(Rbpf::sharded(SlamOptions::default(), 1, 0).is_err());
     }

@@ -16,7 +16,7 @@ use crate::slam::options::SlamOptions;
 impl HostedModel for SlamModel {
     type Snapshot = OccupancyGrid;
 
-    fn from_table(table: toml::Table) -> Result<Self, String> {
+    fn from_table(table: toml::Table) -> crate::Result<Self> {
         SlamModel::new(from_table::<SlamOptions>(table)?)
     }
 

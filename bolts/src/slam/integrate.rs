@@ -48,7 +48,7 @@ mod tests {
 
     #[test]
     fn a_beam_frees_its_path_and_marks_its_end() {
-        let mut g = TiledGrid::new(0.1, (0.0, 0.0));
+        let mut g = TiledGrid::new(0.1, (0.0, 0.0)).unwrap();
         // Robot at (0.05, 0.05) facing +x; one beam straight ahead, 1.03 m.
         let robot = Pose2::new(0.05, 0.05, 0.0);
         assert_eq!(integrate_scan(&mut g, &robot, &scan(vec![1.03], 0.0, 0.0), 30.0), 1);
@@ -65,7 +65,7 @@ mod tests {
 
     #[test]
     fn no_returns_are_skipped_and_long_beams_only_free_space() {
-        let mut g = TiledGrid::new(0.1, (0.0, 0.0));
+        let mut g = TiledGrid::new(0.1, (0.0, 0.0)).unwrap();
         let robot = Pose2::new(0.05, 0.05, 0.0);
         // 50.0 = the range limit (no return), 0 = invalid, 3.0 > usable 2.0.
         let s = scan(vec![50.0, 0.0, 3.0], 0.0, std::f64::consts::FRAC_PI_2);
@@ -79,7 +79,7 @@ mod tests {
 
     #[test]
     fn the_laser_offset_moves_the_beams() {
-        let mut g = TiledGrid::new(0.1, (0.0, 0.0));
+        let mut g = TiledGrid::new(0.1, (0.0, 0.0)).unwrap();
         let mut s = scan(vec![0.5], 0.0, 0.0);
         s.laser_offset = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2);
         integrate_scan(&mut g, &Pose2::new(0.05, 0.05, 0.0), &s, 30.0);

@@ -80,7 +80,7 @@ pub struct SlamModel {
 
 impl SlamModel {
     /// The model; errors name the wrong option.
-    pub fn new(options: SlamOptions) -> Result<Self, String> {
+    pub fn new(options: SlamOptions) -> crate::Result<Self> {
         options.check()?;
         Ok(SlamModel { options })
     }
@@ -104,7 +104,9 @@ impl ParticleModel for SlamModel {
 
     fn start(&self, first: &LaserReading) -> SlamParticle {
         let o = &self.options;
-        let mut map = TiledGrid::new(o.delta, (0.0, 0.0)).with_wall_threshold(o.occupied_threshold);
+        let mut map = TiledGrid::new(o.delta, (0.0, 0.0))
+            .and_then(|g| g.with_wall_threshold(o.occupied_threshold))
+            .expect("SlamModel::new checked delta > 0 and occupied_threshold in [0, 1)");
         integrate_scan(&mut map, &first.odometry, first, o.max_urange);
         map.take_clone_count();
         SlamParticle { pose: first.odometry, map, history: MapHistory::default() }

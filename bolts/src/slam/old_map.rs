@@ -123,7 +123,7 @@ mod tests {
 
     #[test]
     fn snapshots_are_taken_every_age_updates_and_share_tiles() {
-        let mut map = TiledGrid::new(0.05, (0.0, 0.0));
+        let mut map = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
         let mut history = MapHistory::default();
         let hit = |map: &mut TiledGrid, i: i64| map.update((i, 0), |c| c.add_hit(i as f32 * 0.05, 0.0));
         for i in 1..=7 {

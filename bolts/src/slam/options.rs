@@ -1,6 +1,7 @@
 //! Every SLAM setting in one place, with GMapping's ROS defaults (but
 //! `lskip`), checked when built.
 
+use crate::error::{Error, Result, non_negative, positive};
 use serde::{Deserialize, Serialize};
 
 pub use crate::pf::resample::Scheme;
@@ -28,15 +29,15 @@ enum CutoffText {
 }
 
 impl TryFrom<CutoffText> for Cutoff {
-    type Error = String;
+    type Error = Error;
 
-    fn try_from(t: CutoffText) -> Result<Self, String> {
+    fn try_from(t: CutoffText) -> Result<Self> {
         match t {
             CutoffText::Count(n) => Ok(Cutoff::Evaluations(n)),
             CutoffText::Name(s) if s == "none" => Ok(Cutoff::Unbounded),
-            CutoffText::Name(s) => {
-                Err(format!("cutoff must be \"none\" or a number of evaluations, got \"{s}\""))
-            }
+            CutoffText::Name(s) => Err(Error::Setting(format!(
+                "cutoff must be \"none\" or a number of evaluations, got \"{s}\""
+            ))),
         }
     }
 }
@@ -188,15 +189,9 @@ impl SlamOptions {
     }
 
     /// Checks every range; says which setting is wrong.
-    pub fn check(&self) -> Result<(), String> {
-        let positive = |name: &str, v: Real| {
-            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be > 0, got {v}")) }
-        };
-        let non_negative = |name: &str, v: Real| {
-            if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(format!("{name} must be ≥ 0, got {v}")) }
-        };
+    pub fn check(&self) -> Result<()> {
         if self.particles == 0 {
-            return Err("particles must be at least 1".into());
+            return Err(Error::Setting("particles must be at least 1".into()));
         }
         for (n, v) in [
             ("delta", self.delta),
@@ -227,16 +222,21 @@ impl SlamOptions {
             non_negative(n, v)?;
         }
         if !(0.0..=1.0).contains(&self.resample_threshold) || !(0.0..1.0).contains(&self.occupied_threshold) {
-            return Err("resample_threshold must be in [0, 1] and occupied_threshold in [0, 1)".into());
+            return Err(Error::Setting(
+                "resample_threshold must be in [0, 1] and occupied_threshold in [0, 1)".into(),
+            ));
         }
         if self.iterations > 30 {
-            return Err(format!("iterations must be at most 30 step halvings, got {}", self.iterations));
+            return Err(Error::Setting(format!(
+                "iterations must be at most 30 step halvings, got {}",
+                self.iterations
+            )));
         }
         if !(0..=5).contains(&self.kernel) {
-            return Err(format!("kernel must be 0..=5 cells, got {}", self.kernel));
+            return Err(Error::Setting(format!("kernel must be 0..=5 cells, got {}", self.kernel)));
         }
         if self.cutoff == Cutoff::Evaluations(0) {
-            return Err("cutoff must allow at least 1 evaluation".into());
+            return Err(Error::Setting("cutoff must allow at least 1 evaluation".into()));
         }
         Ok(())
     }

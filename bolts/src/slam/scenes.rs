@@ -37,7 +37,7 @@ pub(super) fn room() -> LineMap {
 
 /// `world` mapped (5 cm cells) from `poses`, scans without noise.
 pub(super) fn mapped(world: &LineMap, poses: &[Pose2]) -> TiledGrid {
-    let mut g = TiledGrid::new(0.05, (0.0, 0.0));
+    let mut g = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
     for p in poses {
         integrate_scan(&mut g, p, &scan_of(world, p), 20.0);
     }

@@ -47,7 +47,7 @@ impl PackedGrid {
 }
 
 /// Why a packed map could not be unpacked.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UnpackError {
     /// It refers to a tile this store does not hold (evicted, or the
     /// sender's record is wrong): ask for the map again, whole.
@@ -55,7 +55,7 @@ pub enum UnpackError {
     MissingTile(u128),
     /// The map is damaged.
     #[error("damaged map: {0}")]
-    Invalid(String),
+    Invalid(#[from] crate::slam::grid::GridWireError),
 }
 
 /// Messages a tile is remembered for after it was last referred to.
@@ -139,7 +139,7 @@ impl TileStore {
     pub fn unpack(&mut self, packed: PackedGrid) -> Result<TiledGrid, UnpackError> {
         let message = self.message;
         let wire = packed.0.try_map_tiles(|tile| match tile {
-            PackedTile::Empty => Ok(None),
+            PackedTile::Empty => Ok::<_, UnpackError>(None),
             PackedTile::Held(digest) => {
                 let (tile, last) = self.tiles.get_mut(&digest).ok_or(UnpackError::MissingTile(digest))?;
                 *last = message;
@@ -161,7 +161,7 @@ mod tests {
 
     /// A corridor 8 m long mapped with a wall on each side.
     fn corridor() -> TiledGrid {
-        let mut g = TiledGrid::new(0.05, (0.0, 0.0));
+        let mut g = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
         for x in 0..160 {
             for y in [-20, 20] {
                 g.update((x, y), |c| c.add_hit(x as f32 * 0.05, y as f32 * 0.05));
@@ -239,7 +239,7 @@ mod tests {
     fn sender_and_receiver_forget_the_same_tiles_at_the_same_message() {
         let (mut sent, mut store) = (Sent::default(), TileStore::default());
         let map = corridor();
-        let mut other = TiledGrid::new(0.05, (0.0, 0.0));
+        let mut other = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
         other.update((500, 500), |c| c.add_hit(25.0, 25.0));
         let first = pack(&map, &mut sent);
         let tiles = first.whole_tiles();

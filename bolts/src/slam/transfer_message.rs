@@ -81,7 +81,7 @@ mod tests {
     use crate::slam::grid::TiledGrid;
 
     fn particle(x: f64, walls: i64) -> SlamParticle {
-        let mut map = TiledGrid::new(0.05, (0.0, 0.0));
+        let mut map = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
         for i in 0..walls {
             map.update((i, 10), |c| c.add_hit(i as f32 * 0.05, 0.5));
         }

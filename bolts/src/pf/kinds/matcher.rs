@@ -61,7 +61,7 @@ impl Plan {
         step: u64,
         input: &M::Input,
         received: impl IntoIterator<Item = (usize, M::State)>,
-    ) -> Result<(), String> {
+    ) -> crate::Result<()> {
         shard.adopt(model, step, input, &self.parents, &self.task_of, &self.fresh, &self.holes, received)
     }
 }

@@ -34,7 +34,7 @@ pub trait HostedModel: ParticleModel<Input: Message, State: Message> + Sized {
 
     /// The model from a component's params (without `model` and
     /// `map_interval`); errors name the wrong setting.
-    fn from_table(table: toml::Table) -> Result<Self, String>;
+    fn from_table(table: toml::Table) -> crate::Result<Self>;
 
     /// The snapshot of a particle.
     fn snapshot(&self, state: &Self::State) -> Self::Snapshot;
@@ -57,8 +57,10 @@ pub trait HostedModel: ParticleModel<Input: Message, State: Message> + Sized {
 
 /// A settings struct from a component's params table; the error is the
 /// TOML decoder's message (it names the key).
-pub(crate) fn from_table<T: serde::de::DeserializeOwned>(table: toml::Table) -> Result<T, String> {
-    toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| e.to_string().trim().to_string())
+pub(crate) fn from_table<T: serde::de::DeserializeOwned>(table: toml::Table) -> crate::Result<T> {
+    toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| crate::Error::Params(e.to_string().trim().to_string()))
 }
 
 /// Registers `model` under `name`: a component of kind `pf.dispatcher`,

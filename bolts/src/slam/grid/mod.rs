@@ -28,6 +28,7 @@ pub use cell::{Cell, DEFAULT_WALL_THRESHOLD, MAX_VISITS};
 use tile::TILE_MASK;
 pub use tile::{TILE_BYTES, TILE_SHIFT, TILE_SIDE, Tile};
 pub(crate) use wire::GridWire;
+pub use wire::GridWireError;
 
 /// Extra tiles added on a side when the index grows.
 const GROWTH_SLACK: i64 = 2;
@@ -76,9 +77,13 @@ pub struct TiledGrid {
 
 impl TiledGrid {
     /// An empty grid whose walls are cells with occupancy above
-    /// [`DEFAULT_WALL_THRESHOLD`].
-    pub fn new(resolution: Real, origin: (Real, Real)) -> Self {
-        TiledGrid {
+    /// [`DEFAULT_WALL_THRESHOLD`]; an error if `resolution` is not a
+    /// positive number of metres.
+    pub fn new(resolution: Real, origin: (Real, Real)) -> crate::Result<Self> {
+        if !(resolution.is_finite() && resolution > 0.0) {
+            return Err(crate::Error::Resolution(resolution));
+        }
+        Ok(TiledGrid {
             resolution,
             per_metre: 1.0 / resolution,
             origin,
@@ -88,17 +93,23 @@ impl TiledGrid {
             tiles: Vec::new(),
             wall_threshold: DEFAULT_WALL_THRESHOLD,
             clones: 0,
-        }
+        })
     }
 
     /// The same, with walls above `threshold` (set before any update).
-    ///
-    /// # Panics
-    /// If the grid already holds cells.
-    pub fn with_wall_threshold(mut self, threshold: Real) -> Self {
-        assert!(self.tiles.is_empty(), "the wall threshold is set before the grid holds cells");
+    /// An error if `threshold` is not an occupancy in 0..=1, or if the grid
+    /// already holds cells (their wall and free bits follow the threshold).
+    pub fn with_wall_threshold(mut self, threshold: Real) -> crate::Result<Self> {
+        if !(0.0..=1.0).contains(&threshold) {
+            return Err(crate::Error::WallThreshold(threshold));
+        }
+        if !self.tiles.is_empty() {
+            return Err(crate::Error::Setting(
+                "the wall threshold is set before the grid holds cells".into(),
+            ));
+        }
         self.wall_threshold = threshold;
-        self
+        Ok(self)
     }
 
     /// Occupancy above which a cell is a wall.

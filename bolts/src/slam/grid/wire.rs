@@ -10,6 +10,7 @@ use squall_core::geometry::Real;
 use super::TiledGrid;
 use super::cell::{Cell, MAX_VISITS};
 use super::tile::{Cells, TILE_SIDE, Tile};
+pub use crate::error::GridWireError;
 
 /// A tile as it travels between processes: its cells row by row and its
 /// bit rows.
@@ -27,27 +28,30 @@ impl From<Tile> for TileWire {
 }
 
 impl TryFrom<TileWire> for Tile {
-    type Error = String;
+    type Error = GridWireError;
 
-    fn try_from(w: TileWire) -> Result<Self, String> {
+    fn try_from(w: TileWire) -> Result<Self, GridWireError> {
         let n = w.cells.len();
         if n != TILE_SIDE * TILE_SIDE {
-            return Err(format!("a tile holds {} cells, got {n}", TILE_SIDE * TILE_SIDE));
+            return Err(GridWireError::TileCells { expected: TILE_SIDE * TILE_SIDE, got: n });
         }
         let mut cells = Box::<Cells>::default();
         for (i, &c) in w.cells.iter().enumerate() {
             if c.visits > MAX_VISITS || c.hits > c.visits {
                 let (x, y) = (i % TILE_SIDE, i / TILE_SIDE);
-                return Err(format!(
-                    "tile cell ({x}, {y}): {} hits in {} visits (a cell counts at most {MAX_VISITS} visits and no more hits than visits)",
-                    c.hits, c.visits
-                ));
+                return Err(GridWireError::CellCounts {
+                    x,
+                    y,
+                    hits: c.hits,
+                    visits: c.visits,
+                    max_visits: MAX_VISITS,
+                });
             }
             cells.set(i, c);
         }
-        let rows = |v: Vec<u32>| -> Result<[u32; TILE_SIDE], String> {
+        let rows = |v: Vec<u32>| -> Result<[u32; TILE_SIDE], GridWireError> {
             let n = v.len();
-            v.try_into().map_err(|_| format!("a tile has {TILE_SIDE} bit rows, got {n}"))
+            v.try_into().map_err(|_| GridWireError::BitRows { expected: TILE_SIDE, got: n })
         };
         Ok(Tile { cells, walls: rows(w.walls)?, free: rows(w.free)?, digest: OnceLock::new() })
     }
@@ -105,44 +109,38 @@ impl From<TiledGrid> for GridWire {
 }
 
 impl TryFrom<GridWire> for TiledGrid {
-    type Error = String;
+    type Error = GridWireError;
 
-    fn try_from(w: GridWire) -> Result<Self, String> {
+    fn try_from(w: GridWire) -> Result<Self, GridWireError> {
         if !(w.resolution.is_finite() && w.resolution > 0.0) {
-            return Err(format!("grid resolution {} is not a positive number of metres", w.resolution));
+            return Err(GridWireError::Resolution(w.resolution));
         }
         if !(w.origin.0.is_finite() && w.origin.1.is_finite()) {
-            return Err(format!("grid origin {:?} is not finite", w.origin));
+            return Err(GridWireError::Origin(w.origin));
         }
         if !(0.0..=1.0).contains(&w.wall_threshold) {
-            return Err(format!("wall threshold {} is not an occupancy in 0..=1", w.wall_threshold));
+            return Err(GridWireError::WallThreshold(w.wall_threshold));
         }
         let expected = w.tiles_wide.checked_mul(w.tiles_high);
         if expected != Some(w.tiles.len()) {
-            return Err(format!(
-                "a grid index of {} × {} tiles holds {} entries",
-                w.tiles_wide,
-                w.tiles_high,
-                w.tiles.len()
-            ));
+            let (wide, high, entries) = (w.tiles_wide, w.tiles_high, w.tiles.len());
+            return Err(GridWireError::IndexSize { wide, high, entries });
         }
         let reach = |min: i64, n: usize| i64::try_from(n).ok().and_then(|n| min.checked_add(n));
         if reach(w.tile_min.0, w.tiles_wide).is_none() || reach(w.tile_min.1, w.tiles_high).is_none() {
-            return Err(format!("grid tiles from {:?} reach beyond the coordinates", w.tile_min));
+            return Err(GridWireError::Reach(w.tile_min));
         }
         for (i, tile) in w.tiles.iter().enumerate() {
             let Some(tile) = tile else { continue };
             for (j, cell) in tile.cells.iter().enumerate() {
                 let (x, y) = (j % TILE_SIDE, j / TILE_SIDE);
                 if cell.hits > 0 && !(cell.mean_x.is_finite() && cell.mean_y.is_finite()) {
-                    return Err(format!("tile {i}, cell ({x}, {y}): mean hit point is not finite"));
+                    return Err(GridWireError::MeanHit { tile: i, x, y });
                 }
                 let wall = (tile.walls[y] >> x) & 1 == 1;
                 let free = (tile.free[y] >> x) & 1 == 1;
                 if wall != cell.is_wall(w.wall_threshold) || free != cell.is_free(w.wall_threshold) {
-                    return Err(format!(
-                        "tile {i}, cell ({x}, {y}): wall and free bits disagree with the cell"
-                    ));
+                    return Err(GridWireError::Bits { tile: i, x, y });
                 }
             }
         }

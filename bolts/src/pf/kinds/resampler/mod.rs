@@ -211,7 +211,7 @@ impl Resampler {
             if any_dead { Real::INFINITY } else { settings.threshold },
             settings.scheme,
             settings.injection.map(|i| (i, &fits[..])),
-        );
+        )?;
         let holders = self.task_of.clone();
         if d.resampled {
             self.reassign(&d.parents, &slots, out);
