@@ -14,7 +14,7 @@ use crate::cgr::observation::Observation2d;
 /// the plane points to the robot frame with floor and ceiling dropped
 /// (the camera of the `depth_sim` spout: D435, 0.8 m up, level).
 #[derive(Debug)]
-pub struct DepthPoints {
+pub(crate) struct DepthPoints {
     filter: PlaneFilter,
     mount: CameraMount,
     rng: ChaCha8Rng,
@@ -23,7 +23,7 @@ pub struct DepthPoints {
 
 impl DepthPoints {
     /// Builds it (params: none yet; the seed is the topology's).
-    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+    pub(crate) fn from_params(p: &Params) -> Result<Self, ParamError> {
         if !p.table().is_empty() {
             return Err(ParamError::new("cgr.fspf takes no params yet (the D435 on the depth_sim robot)"));
         }

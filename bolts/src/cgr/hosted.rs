@@ -144,7 +144,7 @@ fn shared_grid(
 
 /// The `cgr` model from the matcher's params (without `model` and
 /// `map_interval`).
-pub fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
+pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
     let p: CgrParams = from_table(table)?;
     if p.map.as_os_str().is_empty() {
         return Err(Error::Setting("`map` (a line-map file) is required".into()));

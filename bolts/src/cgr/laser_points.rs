@@ -11,7 +11,7 @@ use crate::cgr::observation::Observation2d;
 /// `cgr.laser`: each `LaserReading` becomes an `Observation2d` (beams up
 /// to `max_range`, default 8 m).
 #[derive(Debug)]
-pub struct LaserPoints {
+pub(crate) struct LaserPoints {
     max_range: Real,
 }
 
@@ -28,7 +28,7 @@ fn default_range() -> Real {
 
 impl LaserPoints {
     /// Builds it from `max_range`.
-    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+    pub(crate) fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: LaserParams = p.parse()?;
         if !(params.max_range.is_finite() && params.max_range > 0.0) {
             return Err(ParamError::new(format!("max_range must be > 0, got {}", params.max_range)));

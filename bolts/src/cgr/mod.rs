@@ -5,10 +5,10 @@
 //! model, and the kinds that host them (`cgr.laser`, `cgr.fspf`, and
 //! `model = "cgr"` on the particle filter kinds).
 
-pub mod depth_points;
+pub(crate) mod depth_points;
 pub mod fspf;
-pub mod hosted;
-pub mod laser_points;
+pub(crate) mod hosted;
+pub(crate) mod laser_points;
 pub mod measurement;
 pub mod model;
 pub mod observation;

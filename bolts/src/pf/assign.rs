@@ -14,11 +14,11 @@ use pathfinding::prelude::{Matrix, kuhn_munkres_min};
 
 /// Above this many particles the cubic Hungarian algorithm gives way to
 /// the equivalent greedy assignment.
-pub const HUNGARIAN_LIMIT: usize = 256;
+pub(crate) const HUNGARIAN_LIMIT: usize = 256;
 
 /// The load of each of `tasks` tasks sharing `particles` particles: equal,
 /// the first `particles % tasks` one more.
-pub fn loads(particles: usize, tasks: usize) -> Vec<usize> {
+pub(crate) fn loads(particles: usize, tasks: usize) -> Vec<usize> {
     assert!(tasks > 0, "at least one task");
     (0..tasks).map(|t| particles / tasks + usize::from(t < particles % tasks)).collect()
 }
@@ -26,7 +26,7 @@ pub fn loads(particles: usize, tasks: usize) -> Vec<usize> {
 /// A new particle to place: the task holding its parent and the parent's
 /// state size in bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Placement {
+pub(crate) struct Placement {
     /// The task that holds the parent.
     pub home: usize,
     /// Bytes that move if the particle goes anywhere else.
@@ -44,17 +44,17 @@ pub struct Moved {
 
 /// The task of each new particle (same order as `placements`), with the
 /// loads of [`loads`], moving as few bytes as possible.
-pub fn assign(placements: &[Placement], tasks: usize) -> Vec<usize> {
+pub(crate) fn assign(placements: &[Placement], tasks: usize) -> Vec<usize> {
     if placements.len() <= HUNGARIAN_LIMIT { hungarian(placements, tasks) } else { greedy(placements, tasks) }
 }
 
 /// The naive placement to compare with: new particle j to task j mod K.
-pub fn round_robin(particles: usize, tasks: usize) -> Vec<usize> {
+pub(crate) fn round_robin(particles: usize, tasks: usize) -> Vec<usize> {
     (0..particles).map(|j| j % tasks).collect()
 }
 
 /// What placing the particles on `task_of` moves.
-pub fn moved(placements: &[Placement], task_of: &[usize]) -> Moved {
+pub(crate) fn moved(placements: &[Placement], task_of: &[usize]) -> Moved {
     placements
         .iter()
         .zip(task_of)

@@ -6,15 +6,15 @@
 //! serial filter; K > 1 gives the same results, which is what the parallel
 //! topology relies on).
 
-pub mod assign;
+pub(crate) mod assign;
 pub mod filter;
 pub mod kinds;
 pub mod model;
-pub mod modes;
+pub(crate) mod modes;
 pub mod population;
 pub mod resample;
 pub mod shard;
-pub mod trajectory;
+pub(crate) mod trajectory;
 
 pub use filter::{Filter, StepReport};
 pub use model::{Correction, ParticleModel};

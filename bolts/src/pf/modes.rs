@@ -11,7 +11,7 @@ use squall_core::geometry::{Pose2, Real, normalize_angle};
 
 /// One place the robot may be.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Mode {
+pub(crate) struct Mode {
     /// Weighted mean pose of its particles.
     pub pose: Pose2,
     /// Its share of the total weight.
@@ -22,7 +22,7 @@ pub struct Mode {
 
 /// The hypotheses at one reading, heaviest first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Hypotheses {
+pub(crate) struct Hypotheses {
     /// Seconds.
     pub stamp: f64,
     /// At most the requested number of modes.
@@ -32,11 +32,11 @@ pub struct Hypotheses {
 /// Modes opened at most: particles that fit none of them once this many
 /// exist (light ones, taken last) are left out, which bounds the work by
 /// N × this for a spread-out set.
-pub const MAX_OPEN: usize = 64;
+pub(crate) const MAX_OPEN: usize = 64;
 
 /// The `keep` heaviest modes of `poses` with normalized `weights` (a
 /// mode's weight is its share of all the weight).
-pub fn modes(poses: &[Pose2], weights: &[Real], radius: Real, turn: Real, keep: usize) -> Vec<Mode> {
+pub(crate) fn modes(poses: &[Pose2], weights: &[Real], radius: Real, turn: Real, keep: usize) -> Vec<Mode> {
     let mut order: Vec<usize> = (0..poses.len().min(weights.len())).collect();
     order.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
     // (seed pose, Σw, Σw·x, Σw·y, Σw·cos, Σw·sin, count)

@@ -26,7 +26,7 @@ pub enum BetweenScans {
 }
 
 /// A processed scan: (stamp, corrected pose, odometry at that scan).
-pub type Corrected = (f64, Pose2, Pose2);
+pub(crate) type Corrected = (f64, Pose2, Pose2);
 
 /// Odometry noise weights: how much translation noise one metre of travel
 /// and one radian of turning add (the motion model's srr and str).
@@ -42,7 +42,7 @@ pub struct NoiseWeights {
 /// processed scans `corrected` (oldest first, stamps among the scans').
 /// Scans before the first processed scan get no pose (the filter had
 /// none), so the output may be shorter than the input.
-pub fn fill(
+pub(crate) fn fill(
     corrected: &[Corrected],
     scans: &[(f64, Pose2)],
     mode: BetweenScans,

@@ -10,7 +10,12 @@ use squall_core::sensor::LaserReading;
 
 /// Adds `scan`, taken with the robot at `robot` (world frame), to `grid`,
 /// using beams up to `usable_range` metres. Returns the beams used.
-pub fn integrate_scan(grid: &mut TiledGrid, robot: &Pose2, scan: &LaserReading, usable_range: Real) -> usize {
+pub(crate) fn integrate_scan(
+    grid: &mut TiledGrid,
+    robot: &Pose2,
+    scan: &LaserReading,
+    usable_range: Real,
+) -> usize {
     let laser = robot.compose(&scan.laser_offset);
     let start = grid.cell_of(laser.x, laser.y);
     let mut used = 0;

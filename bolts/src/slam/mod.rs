@@ -6,15 +6,15 @@
 
 pub mod filter;
 pub mod grid;
-pub mod hosted;
-pub mod integrate;
-pub mod matcher;
+pub(crate) mod hosted;
+pub(crate) mod integrate;
+pub(crate) mod matcher;
 pub mod model;
-pub mod old_map;
+pub(crate) mod old_map;
 pub mod options;
 #[cfg(test)]
 mod scenes;
-pub mod transfer;
+pub(crate) mod transfer;
 mod transfer_message;
 
 pub use hosted::register;

@@ -81,7 +81,7 @@ const KEEP: Real = 0.9;
 /// `climbed`: the better match it finds, or `climbed` if the search was
 /// not needed, could not run or found nothing better; either way with the
 /// search's evaluations added.
-pub fn search_old_map(
+pub(crate) fn search_old_map(
     matcher: &mut Matcher,
     map: &TiledGrid,
     history: &MapHistory,

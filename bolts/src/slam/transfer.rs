@@ -20,7 +20,7 @@ use crate::slam::grid::{GridWire, Tile, TiledGrid};
 
 /// A tile in a packed map.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub enum PackedTile {
+pub(crate) enum PackedTile {
     /// No tile here.
     Empty,
     /// A tile the receiver holds, by digest.
@@ -59,7 +59,7 @@ pub enum UnpackError {
 }
 
 /// Messages a tile is remembered for after it was last referred to.
-pub const KEEP_MESSAGES: u64 = 4;
+pub(crate) const KEEP_MESSAGES: u64 = 4;
 
 /// What a sender knows one receiver holds: each digest with the message
 /// that last referred to it.
@@ -95,7 +95,7 @@ impl Sent {
 
 /// Packs `grid` for the receiver that `sent` describes, and records the
 /// tiles it will hold.
-pub fn pack(grid: &TiledGrid, sent: &mut Sent) -> PackedGrid {
+pub(crate) fn pack(grid: &TiledGrid, sent: &mut Sent) -> PackedGrid {
     let message = sent.message;
     PackedGrid(GridWire::from(grid.clone()).map_tiles(|tile| match tile {
         None => PackedTile::Empty,

@@ -23,7 +23,7 @@ pub struct Cell {
 /// visits: the occupancy the wall test reads stays (to within one hit), and
 /// later beams weigh a little more. A cell reaches this only after tens of
 /// thousands of beams crossed it (none does in the logs of this repository).
-pub const MAX_VISITS: u32 = u16::MAX as u32;
+pub(crate) const MAX_VISITS: u32 = u16::MAX as u32;
 
 /// Occupancy above which a cell is a wall, unless set otherwise.
 pub const DEFAULT_WALL_THRESHOLD: Real = 0.1;

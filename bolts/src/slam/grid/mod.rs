@@ -24,9 +24,10 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use squall_core::geometry::{Real, round_small};
 
-pub use cell::{Cell, DEFAULT_WALL_THRESHOLD, MAX_VISITS};
+pub(crate) use cell::Cell;
+pub use cell::DEFAULT_WALL_THRESHOLD;
 use tile::TILE_MASK;
-pub use tile::{TILE_BYTES, TILE_SHIFT, TILE_SIDE, Tile};
+pub(crate) use tile::{TILE_BYTES, TILE_SHIFT, TILE_SIDE, Tile};
 pub(crate) use wire::GridWire;
 pub use wire::GridWireError;
 

@@ -2,6 +2,7 @@
 //! growth, copy-on-write, beams across tiles, the kernel search against a
 //! cell-by-cell search, count limits.
 
+use super::cell::MAX_VISITS;
 use super::wire::TileWire;
 use super::*;
 use rand::{RngExt, SeedableRng};

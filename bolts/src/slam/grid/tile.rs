@@ -10,14 +10,14 @@ use super::cell::{Cell, MAX_VISITS};
 use super::wire::TileWire;
 
 /// Cells per tile side is `1 << TILE_SHIFT`.
-pub const TILE_SHIFT: u32 = 5;
+pub(crate) const TILE_SHIFT: u32 = 5;
 /// Cells per tile side.
-pub const TILE_SIDE: usize = 1 << TILE_SHIFT;
+pub(crate) const TILE_SIDE: usize = 1 << TILE_SHIFT;
 /// A cell's place within its tile is its coordinates masked with this.
 pub(super) const TILE_MASK: i64 = TILE_SIDE as i64 - 1;
 
 /// Bytes one tile occupies.
-pub const TILE_BYTES: usize = std::mem::size_of::<Cells>() + 8 * TILE_SIDE;
+pub(crate) const TILE_BYTES: usize = std::mem::size_of::<Cells>() + 8 * TILE_SIDE;
 
 /// A square block of cells, with one bit per cell saying whether it is a
 /// wall and one saying whether it is free, so the scan matcher finds the

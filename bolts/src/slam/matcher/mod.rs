@@ -35,14 +35,16 @@ use crate::slam::grid::TiledGrid;
 use crate::slam::options::{Cutoff, SlamOptions};
 use beam_cache::BeamCache;
 use headings::{Headings, Lattice};
-pub use scan::PreparedScan;
+pub(crate) use scan::PreparedScan;
 use scan::{Turned, directions, laser_heading};
-pub use score::{covered_beams, likelihood_and_score, score};
+pub(crate) use score::covered_beams;
+#[cfg(test)]
+use score::{likelihood_and_score, score};
 use score::{likelihood_with, score_with};
 
 /// The outcome of one particle's scan matching.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Matched {
+pub(crate) struct Matched {
     /// The best pose found.
     pub pose: Pose2,
     /// Its score.
@@ -57,8 +59,10 @@ pub struct Matched {
 }
 
 /// Hill-climbs the score from `init` (GMapping's `optimize`), with scratch
-/// memory of its own; a filter keeps a [`Matcher`] instead.
-pub fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Matched {
+/// memory of its own; a filter keeps a [`Matcher`] instead. The tests'
+/// reference.
+#[cfg(test)]
+pub(crate) fn optimize(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Matched {
     Matcher::default().optimize(grid, init, scan, o)
 }
 
@@ -73,7 +77,7 @@ const WIDE_SEARCH_BEAM_STRIDE: usize = 4;
 /// poses scored), kept from particle to particle and reading to reading so
 /// that matching allocates nothing once warm.
 #[derive(Debug, Default)]
-pub struct Matcher {
+pub(crate) struct Matcher {
     cache: BeamCache,
     /// The climb's beam directions by heading.
     headings: Headings,
@@ -90,7 +94,7 @@ impl Matcher {
     /// (odometry far off, as in the Intel log) and no cutoff bounds the
     /// work, a wide search whose pose is kept if it scores
     /// `wide_search_margin` times higher. Evaluations of both are counted.
-    pub fn refine(
+    pub(crate) fn refine(
         &mut self,
         grid: &TiledGrid,
         predicted: &Pose2,
@@ -114,7 +118,7 @@ impl Matcher {
 
     /// [`likelihood_and_score`] with this matcher's scratch memory (no
     /// allocation once warm).
-    pub fn likelihood(
+    pub(crate) fn likelihood(
         &mut self,
         grid: &TiledGrid,
         pose: &Pose2,
@@ -127,7 +131,7 @@ impl Matcher {
     }
 
     /// Hill-climbs the score from `init` (GMapping's `optimize`).
-    pub fn optimize(
+    pub(crate) fn optimize(
         &mut self,
         grid: &TiledGrid,
         init: &Pose2,
@@ -144,7 +148,7 @@ impl Matcher {
     /// its best pose: for readings the climb from `init` could not match
     /// well.
     #[allow(clippy::too_many_arguments)]
-    pub fn wide_search(
+    pub(crate) fn wide_search(
         &mut self,
         grid: &TiledGrid,
         init: &Pose2,

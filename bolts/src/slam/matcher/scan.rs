@@ -29,14 +29,14 @@ impl Beam {
 
 /// A reading prepared for matching: usable beams only.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct PreparedScan {
+pub(crate) struct PreparedScan {
     pub(super) beams: Vec<Beam>,
     pub(super) laser_offset: Pose2,
 }
 
 impl PreparedScan {
     /// Keeps valid beams up to `max_urange`, every (lskip+1)-th.
-    pub fn new(scan: &LaserReading, o: &SlamOptions) -> Self {
+    pub(crate) fn new(scan: &LaserReading, o: &SlamOptions) -> Self {
         let beams = (0..scan.ranges.len())
             .filter(|&i| {
                 i % (o.lskip + 1) == 0 && scan.is_valid(i) && Real::from(scan.ranges[i]) <= o.max_urange
@@ -53,20 +53,15 @@ impl PreparedScan {
     /// nothing is allocated once warm): a coarse search scores many poses
     /// far apart, where a quarter of the beams tells them apart as well as
     /// all of them do.
-    pub fn every_nth_into(&self, stride: usize, out: &mut PreparedScan) {
+    pub(crate) fn every_nth_into(&self, stride: usize, out: &mut PreparedScan) {
         out.beams.clear();
         out.beams.extend(self.beams.iter().step_by(stride.max(1)));
         out.laser_offset = self.laser_offset;
     }
 
     /// Beams that will be matched.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.beams.len()
-    }
-
-    /// Whether no beam is usable.
-    pub fn is_empty(&self) -> bool {
-        self.beams.is_empty()
     }
 }
 

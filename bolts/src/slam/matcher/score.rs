@@ -5,10 +5,14 @@
 
 use squall_core::geometry::{Pose2, Real};
 
-use super::Matcher;
 use super::beam_cache::BeamCache;
 use super::fast_exp::exp_neg;
-use super::scan::{Beam, Direction, PreparedScan, Turned, directions, laser_heading};
+use super::scan::{Beam, Direction, PreparedScan, Turned};
+#[cfg(test)]
+use super::{
+    Matcher,
+    scan::{directions, laser_heading},
+};
 use crate::slam::grid::{FIXED_BITS, TiledGrid};
 use crate::slam::options::SlamOptions;
 
@@ -136,16 +140,18 @@ pub(super) fn score_with(
     Some(s)
 }
 
-/// The matching score of `pose` (higher is better).
-pub fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
+/// The matching score of `pose` (higher is better); the tests' reference.
+#[cfg(test)]
+pub(crate) fn score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
     let mut turned = Turned::default();
     directions(grid, scan, laser_heading(pose, scan), &mut turned);
     score_with(grid, pose, scan, &turned, o, &mut BeamCache::default(), Real::NEG_INFINITY)
         .expect("nothing is beaten by −∞")
 }
 
-/// (score, log-likelihood, beams matched) of `pose`.
-pub fn likelihood_and_score(
+/// (score, log-likelihood, beams matched) of `pose`; the tests' reference.
+#[cfg(test)]
+pub(crate) fn likelihood_and_score(
     grid: &TiledGrid,
     pose: &Pose2,
     scan: &PreparedScan,
@@ -179,7 +185,7 @@ pub(super) fn likelihood_with(
 /// Beams of `scan` whose end point, with the robot at `pose`, lies in a
 /// cell `grid` has seen (crossed or hit): how much of the view a map
 /// covers.
-pub fn covered_beams(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan) -> usize {
+pub(crate) fn covered_beams(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan) -> usize {
     let laser = pose.compose(&scan.laser_offset);
     let (s, c) = laser.theta.sin_cos();
     let seen = |b: &&Beam| {
