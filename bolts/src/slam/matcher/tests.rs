@@ -1,0 +1,258 @@
+//! The matcher against hand-made scenes: scores equal to the grid's own
+//! kernel search, climbs that find the true pose, bounds that never change
+//! a result.
+
+use super::beam_cache::{CACHE_CAPACITY, INLINE};
+use super::fast_exp::exp_neg;
+use super::scan::{back_code, step_back};
+use super::*;
+use crate::slam::scenes::{mapped, room, scan_of};
+
+/// The room mapped from three poses, the true pose of the scan to
+/// match, default options and that scan.
+fn scene() -> (TiledGrid, Pose2, SlamOptions, PreparedScan) {
+    let world = room();
+    let truth = Pose2::new(3.3, 1.7, 0.4);
+    let grid = mapped(&world, &[truth, Pose2::new(1.0, 4.0, -1.0), Pose2::new(6.5, 1.5, 2.0)]);
+    let o = SlamOptions::default();
+    let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
+    (grid, truth, o, scan)
+}
+
+/// The score as the grid's own kernel search gives it, beam by beam in
+/// order, with nothing cached (d²/σ as the matcher rounds it: times
+/// 1/σ).
+fn reference_score(grid: &TiledGrid, pose: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Real {
+    let per_sigma = 1.0 / o.sigma;
+    let laser = pose.compose(&scan.laser_offset);
+    let (s, c) = laser.theta.sin_cos();
+    let mut score = 0.0;
+    for b in &scan.beams {
+        let (cos, sin) = b.turned(c, s);
+        let end = (laser.x + b.range * cos, laser.y + b.range * sin);
+        if let Some(d2) = grid.nearest_backed_wall(end, (step_back(cos), step_back(sin)), o.kernel) {
+            score += exp_neg(d2 * per_sigma);
+        }
+    }
+    score
+}
+
+#[test]
+fn a_prepared_scan_keeps_every_lskip_plus_first_valid_beam_within_range() {
+    let mut reading = scan_of(&room(), &Pose2::new(3.3, 1.7, 0.4));
+    reading.ranges[..8].copy_from_slice(&[1.0, 2.0, 0.0, 3.0, 90.0, 4.0, 5.0, 6.0]);
+    reading.ranges.truncate(8);
+    reading.range_max = 100.0;
+    let ranges = |lskip, max_urange| {
+        let o = SlamOptions { lskip, max_urange, ..SlamOptions::default() };
+        PreparedScan::new(&reading, &o).beams.iter().map(|b| b.range).collect::<Vec<_>>()
+    };
+    // Beam 2 is no return, beam 4 beyond max_urange.
+    assert_eq!(ranges(0, 80.0), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    assert_eq!(ranges(1, 80.0), [1.0, 5.0]);
+    assert_eq!(ranges(3, 80.0), [1.0]);
+    assert_eq!(ranges(1, 100.0), [1.0, 90.0, 5.0]);
+    assert_eq!(SlamOptions::default().lskip, 1, "the default matches every other beam");
+}
+
+#[test]
+fn the_score_is_the_grid_kernel_search_summed() {
+    let (grid, truth, o, scan) = scene();
+    // A beam whose cell lies beyond ±2³¹ cells: the scan is no longer
+    // short, and that beam is matched uncached. (Beam 8: with the
+    // default lskip of 1 only even beams are matched.)
+    let mut far_reading = scan_of(&room(), &truth);
+    far_reading.range_max = 1e9;
+    far_reading.ranges[8] = 2e8;
+    let far_options = SlamOptions { max_urange: 1e9, ..o.clone() };
+    let far = PreparedScan::new(&far_reading, &far_options);
+    let mut cache = BeamCache::default();
+    for (scan, o, short) in [(&scan, &o, true), (&far, &far_options, false)] {
+        for (i, dx) in [-0.3, -0.05, 0.0, 0.02, 0.2].into_iter().enumerate() {
+            let pose = Pose2::new(truth.x + dx, truth.y - dx, truth.theta + 0.5 * dx);
+            let mut turned = Turned::default();
+            directions(&grid, scan, laser_heading(&pose, scan), &mut turned);
+            assert_eq!(turned.short, short);
+            let want = reference_score(&grid, &pose, scan, o);
+            assert!(want > 10.0, "pose {i} matches beams ({want})");
+            for _ in 0..2 {
+                // Cold, then from the cache: the same sum, bit for bit.
+                let got = score_with(&grid, &pose, scan, &turned, o, &mut cache, Real::NEG_INFINITY);
+                assert_eq!(got.map(Real::to_bits), Some(want.to_bits()), "pose {i}, short {short}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_bounded_score_gives_up_only_on_poses_that_cannot_win() {
+    let (grid, truth, o, scan) = scene();
+    let mut cache = BeamCache::default();
+    let (mut dirs, mut given_up) = (Turned::default(), 0);
+    for (i, dx) in [-0.3, -0.05, 0.0, 0.02, 0.2].into_iter().enumerate() {
+        let pose = Pose2::new(truth.x + dx, truth.y - dx, truth.theta + 0.5 * dx);
+        directions(&grid, &scan, laser_heading(&pose, &scan), &mut dirs);
+        let full = score_with(&grid, &pose, &scan, &dirs, &o, &mut cache, Real::NEG_INFINITY).unwrap();
+        assert!(full > 10.0, "pose {i} matches beams ({full})");
+        for to_beat in [full - 1.0, full - 1e-9, full, full + 1e-9, full + 0.5, full + 5.0, 1e6] {
+            match score_with(&grid, &pose, &scan, &dirs, &o, &mut cache, to_beat) {
+                // The same sum, bit for bit.
+                Some(s) => assert_eq!(s.to_bits(), full.to_bits(), "pose {i}, to beat {to_beat}"),
+                None => {
+                    assert!(full <= to_beat, "pose {i} scores {full} > {to_beat} but was given up");
+                    given_up += 1;
+                }
+            }
+        }
+        // Nothing can beat a score above one per beam: given up early.
+        assert_eq!(score_with(&grid, &pose, &scan, &dirs, &o, &mut cache, 1e6), None);
+    }
+    assert!(given_up >= 10, "poses that cannot win are given up ({given_up})");
+}
+
+#[test]
+fn the_cache_answers_as_the_grid_does() {
+    use rand::{RngExt, SeedableRng};
+    let (grid, _, _, _) = scene();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut cache = BeamCache::default();
+    let (mut matched, mut overflowing) = (0, 0);
+    // Wider kernels' windows hold more walls than a slot does; kernel 4
+    // runs without forgetting, so that the overflow's bound is reached.
+    for k in [1, 2, 4] {
+        for round in 0..40_000 {
+            if round == 0 || (k < 4 && round % 5_000 == 0) {
+                cache.forget();
+            }
+            let hit = (rng.random::<f64>() * 8.0, rng.random::<f64>() * 6.0);
+            let back = (rng.random_range(-1..=1), rng.random_range(-1..=1));
+            let want = grid.nearest_backed_wall(hit, back, k);
+            let (cell, end) = (grid.cell_of(hit.0, hit.1), (hit.0 as f32, hit.1 as f32));
+            assert_eq!(
+                cache.nearest(&grid, cell, end, back, back_code(back), k),
+                want,
+                "{hit:?} {back:?} k {k}"
+            );
+            // Asked again, from the cache.
+            assert_eq!(
+                cache.nearest(&grid, cell, end, back, back_code(back), k),
+                want,
+                "{hit:?} {back:?} k {k}, cached"
+            );
+            matched += usize::from(want.is_some());
+            let mut found = 0;
+            grid.backed_walls(grid.cell_of(hit.0, hit.1), back, k, |_, _| found += 1);
+            overflowing += usize::from(found > INLINE);
+        }
+    }
+    assert!(
+        matched > 1_000 && overflowing > 100,
+        "the test reaches walls ({matched}) and overflows ({overflowing})"
+    );
+    // The overflow's bound starts the cache over rather than growing.
+    assert!(cache.generation > 1 + 17, "the cache started over {} times", cache.generation - 18);
+    assert!(cache.overflow.len() <= CACHE_CAPACITY + 81, "{}", cache.overflow.len());
+}
+
+#[test]
+fn the_inline_exponential_matches_libm() {
+    for i in 0..20_000 {
+        let x = i as Real * 1e-3;
+        let (got, want) = (exp_neg(x), (-x).exp());
+        assert!((got - want).abs() <= 1e-13 * want, "{x}: {got} vs {want}");
+    }
+    assert!(exp_neg(300.0) > 0.0 && exp_neg(800.0) == 0.0 && exp_neg(Real::INFINITY) == 0.0);
+}
+
+#[test]
+fn the_step_back_rounds_like_gmapping() {
+    for i in 0..=3600 {
+        let a = (i as Real / 10.0).to_radians();
+        let (s, c) = a.sin_cos();
+        for v in [c, s] {
+            let want = (-v * std::f64::consts::SQRT_2).round() as i64;
+            // Away from the rounding boundary the two agree exactly.
+            if ((v * std::f64::consts::SQRT_2).abs() - 0.5).abs() > 1e-9 {
+                assert_eq!(step_back(v), want, "{v}");
+            }
+        }
+    }
+}
+
+#[test]
+fn recovers_known_offsets() {
+    use rand::{RngExt, SeedableRng};
+    let (grid, truth, o, scan) = scene();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12345);
+    for _ in 0..20 {
+        let mut r = || rng.random::<f64>() - 0.5;
+        let start = Pose2::new(truth.x + 0.2 * r(), truth.y + 0.2 * r(), truth.theta + 0.1 * r());
+        let m = optimize(&grid, &start, &scan, &o);
+        assert!(m.pose.distance(&truth) < 0.02, "from {start:?}: {:?}", m.pose);
+        assert!((m.pose.theta - truth.theta).abs() < 0.01, "from {start:?}: {:?}", m.pose);
+        assert_eq!(m.log_likelihood, likelihood_and_score(&grid, &m.pose, &scan, &o).1);
+    }
+}
+
+#[test]
+fn the_wide_search_recovers_an_offset_the_climb_cannot() {
+    let (grid, truth, o, scan) = scene();
+    let start = Pose2::new(3.55, 1.45, 0.52);
+    let wide = Matcher::default().wide_search(&grid, &start, &scan, &o, 0.3, 0.15, 3);
+    assert!(wide.pose.distance(&truth) < 0.02, "{:?}", wide.pose);
+    assert!(wide.evaluations > 343, "the grid and the climb are counted: {}", wide.evaluations);
+    let climb = optimize(&grid, &start, &scan, &o);
+    assert!(climb.score < wide.score, "{} vs {}", climb.score, wide.score);
+}
+
+#[test]
+fn a_reused_matcher_forgets_the_previous_map() {
+    let (grid, truth, o, scan) = scene();
+    // Another map: the same room seen from a pose 0.3 m off, so its
+    // walls (and cached candidates) lie elsewhere.
+    let shifted = mapped(&room(), &[Pose2::new(3.0, 1.7, 0.4)]);
+    let mut reused = Matcher::default();
+    let on_grid = reused.optimize(&grid, &truth, &scan, &o);
+    let start = Pose2::new(3.35, 1.65, 0.42);
+    let again = reused.optimize(&shifted, &start, &scan, &o);
+    assert_eq!(again, optimize(&shifted, &start, &scan, &o), "as if fresh");
+    assert_ne!(again.pose, on_grid.pose);
+    assert_eq!(reused.optimize(&grid, &truth, &scan, &o), on_grid);
+}
+
+#[test]
+fn the_true_pose_scores_best_and_likelihood_agrees() {
+    let world = room();
+    let truth = Pose2::new(3.3, 1.7, 0.4);
+    let grid = mapped(&world, &[truth]);
+    let o = SlamOptions::default();
+    let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
+    let off = Pose2::new(3.4, 1.7, 0.4);
+    assert!(score(&grid, &truth, &scan, &o) > score(&grid, &off, &scan, &o));
+    let (s, l, n) = likelihood_and_score(&grid, &truth, &scan, &o);
+    let (_, l_off, _) = likelihood_and_score(&grid, &off, &scan, &o);
+    assert!(s > 0.0 && 10 * n > 8 * scan.beams.len() && l > l_off, "{s} {l} {n} {l_off}");
+    // The same from a matcher that last matched on another map.
+    let mut reused = Matcher::default();
+    reused.optimize(&mapped(&world, &[off]), &off, &scan, &o);
+    assert_eq!(reused.likelihood(&grid, &truth, &scan, &o), (s, l, n));
+}
+
+#[test]
+fn the_cutoff_bounds_evaluations() {
+    let world = room();
+    let truth = Pose2::new(3.3, 1.7, 0.4);
+    let grid = mapped(&world, &[truth]);
+    let start = Pose2::new(3.45, 1.6, 0.45);
+    let free = optimize(
+        &grid,
+        &start,
+        &PreparedScan::new(&scan_of(&world, &truth), &SlamOptions::default()),
+        &SlamOptions::default(),
+    );
+    let o = SlamOptions { cutoff: Cutoff::Evaluations(10), ..SlamOptions::default() };
+    let cut = optimize(&grid, &start, &PreparedScan::new(&scan_of(&world, &truth), &o), &o);
+    assert!(free.evaluations > 10, "{}", free.evaluations);
+    assert_eq!(cut.evaluations, 10);
+    assert!(cut.score <= free.score);
+}
