@@ -23,6 +23,9 @@
 //! of the new set, sent by the others with the reading. Metric:
 //! `particles_lost`.
 
+mod loss;
+mod tasks;
+
 use std::time::Instant;
 
 use serde::Deserialize;
@@ -36,6 +39,7 @@ use crate::pf::shard::SlotReport;
 use crate::pf::trajectory;
 use squall_core::geometry::{Pose2, Real};
 use squall_core::sensor::PoseStamped;
+use tasks::{Gathered, Holding, TaskState};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -64,21 +68,27 @@ fn default_turn() -> Real {
     0.5
 }
 
-/// Reports gathered for the current reading.
-#[derive(Debug, Default)]
-struct Gathered {
+/// How the particle set's modes are reported on `hypotheses`.
+#[derive(Debug, Clone, Copy)]
+struct ModeSettings {
+    /// Modes reported per correction.
+    keep: usize,
+    /// Particles within this distance (m) of a mode's seed join it.
+    radius: Real,
+    /// ...and within this heading difference, radians.
+    turn: Real,
+}
+
+/// A decision out, until every task has updated.
+#[derive(Debug, Clone)]
+struct Deciding {
+    /// The reading decided.
     step: u64,
-    tasks_heard: usize,
-    /// Which tasks have been heard (or stand in as lost).
-    heard_from: Vec<bool>,
-    /// Whether a task corrected (rather than only predicted).
-    corrected: bool,
-    slots: Vec<SlotReport>,
-    busy_us: Vec<u64>,
-    update_work: u64,
-    mark: Option<(f64, Pose2)>,
-    /// (slot, pose) at the start.
-    starts: Vec<(usize, Pose2)>,
+    /// Each new slot's parent.
+    parents: Vec<usize>,
+    /// The task that held each parent (the slots' tasks before the
+    /// decision).
+    holders: Vec<usize>,
 }
 
 /// The resampler.
@@ -93,23 +103,17 @@ pub struct Resampler {
     /// Every reading's stamp and odometry, for the trajectory.
     marks: Vec<(f64, Pose2)>,
     gathered: Gathered,
-    /// (modes kept, radius, turn) for `hypotheses`.
-    modes: (usize, Real, Real),
-    /// Tasks whose replacement has not reported for itself yet: they count
-    /// as heard.
-    standing_in: Vec<bool>,
-    /// Tasks that hold no particles until a decision has them join.
-    empty: Vec<bool>,
+    /// How modes are reported on `hypotheses`.
+    modes: ModeSettings,
+    /// What each matcher task holds and whether it was replaced (empty
+    /// until a task is lost: every task then holds its share).
+    task_states: Vec<TaskState>,
     /// Slots whose states were lost, until the next decision replaces them.
     dead: Vec<bool>,
-    /// After a decision, until every task has updated: (step, parents,
-    /// the tasks that held the parents).
-    deciding: Option<(u64, Vec<usize>, Vec<usize>)>,
+    /// After a decision, until every task has updated.
+    deciding: Option<Deciding>,
     /// The last reading every task was heard for.
     done: Option<u64>,
-    /// Tasks that were lost (their replacements' reports for readings
-    /// already done are late, and dropped).
-    replaced: Vec<bool>,
 }
 
 impl Resampler {
@@ -130,135 +134,22 @@ impl Resampler {
             task_of: Vec::new(),
             marks: Vec::new(),
             gathered: Gathered::default(),
-            modes: (params.hypotheses, params.mode_radius, params.mode_turn),
-            standing_in: Vec::new(),
-            empty: Vec::new(),
+            modes: ModeSettings {
+                keep: params.hypotheses,
+                radius: params.mode_radius,
+                turn: params.mode_turn,
+            },
+            task_states: Vec::new(),
             dead: Vec::new(),
             deciding: None,
             done: None,
-            replaced: Vec::new(),
         })
-    }
-
-    /// Counts a report from a task; `true` once every task has reported.
-    fn heard(&mut self, step: u64, task: u32, tasks: u32) -> Result<bool, BoxError> {
-        let tasks = tasks as usize;
-        if *self.tasks.get_or_insert(tasks) != tasks || task as usize >= tasks {
-            return Err(format!(
-                "pf.resampler: report from task {task} of {tasks}, expected {:?} tasks",
-                self.tasks
-            )
-            .into());
-        }
-        if self.gathered.tasks_heard > 0 && self.gathered.step != step {
-            let had = self.gathered.step;
-            return Err(format!("pf.resampler: a report for reading {step} while gathering {had}").into());
-        }
-        self.gathered.step = step;
-        if self.gathered.heard_from.len() != tasks {
-            self.gathered.heard_from = vec![false; tasks];
-        }
-        let first_own = self.standing_in.get(task as usize).copied().unwrap_or(false);
-        if first_own {
-            // The replacement reports for itself from now on.
-            self.standing_in[task as usize] = false;
-        }
-        if !std::mem::replace(&mut self.gathered.heard_from[task as usize], true) {
-            self.gathered.tasks_heard += 1;
-        } else if !first_own {
-            return Err(format!("pf.resampler: task {task} reported twice for reading {step}").into());
-        }
-        self.stand_in();
-        Ok(self.gathered.tasks_heard == tasks)
-    }
-
-    /// Counts the tasks that stand in as lost as heard.
-    fn stand_in(&mut self) {
-        let g = &mut self.gathered;
-        for (t, &standing) in self.standing_in.iter().enumerate() {
-            if standing && g.heard_from.get(t) == Some(&false) {
-                g.heard_from[t] = true;
-                g.tasks_heard += 1;
-            }
-        }
-    }
-
-    /// A replacement says task `task`'s particles were lost.
-    async fn lost(&mut self, task: usize, tasks: usize, out: &mut Emitter) -> Result<(), BoxError> {
-        if self.tasks != Some(tasks) || task >= tasks || self.population.is_none() {
-            return Err(format!("pf.resampler: task {task} of {tasks} lost before the filter started").into());
-        }
-        self.standing_in.resize(tasks, false);
-        self.empty.resize(tasks, false);
-        if self.empty[task] {
-            return Ok(());
-        }
-        self.standing_in[task] = true;
-        self.empty[task] = true;
-        self.replaced.resize(tasks, false);
-        self.replaced[task] = true;
-        if self.empty.iter().all(|&e| e) {
-            return Err("pf.resampler: every matcher task lost its particles".into());
-        }
-        let population = self.population.as_mut().expect("checked");
-        self.dead.resize(population.len(), false);
-        let mut holes = Vec::new();
-        if let Some((step, parents, holders)) = &self.deciding {
-            // States the lost task was to send will not come.
-            for (j, (&p, &to)) in parents.iter().zip(&self.task_of).enumerate() {
-                if to != task && holders[p] == task {
-                    holes.push(j as u32);
-                    self.dead[j] = true;
-                }
-            }
-            out.emit("decision", Decision::lost_notice(*step, task as u32, holes.clone())).await?;
-        }
-        for (slot, &t) in self.task_of.iter().enumerate() {
-            if t == task {
-                self.dead[slot] = true;
-            }
-        }
-        // Count each slot once, however many losses named it.
-        let mut lost = 0;
-        for (slot, &dead) in self.dead.iter().enumerate() {
-            if dead && population.lineage_weight(slot) != Real::NEG_INFINITY {
-                population.lose(slot);
-                lost += 1;
-            }
-        }
-        out.count("particles_lost", lost);
-        tracing::warn!("pf.resampler: matcher task {task} was lost; {lost} particles are gone");
-        if self.count_lost_as_heard(tasks) {
-            self.complete(out).await?;
-        }
-        Ok(())
-    }
-
-    /// After a loss, while a reading is being gathered or updated after a
-    /// decision: the lost tasks count as heard for it. `true` if that
-    /// completes it.
-    fn count_lost_as_heard(&mut self, tasks: usize) -> bool {
-        let in_progress = self.gathered.tasks_heard > 0 || self.deciding.is_some();
-        if !in_progress {
-            return false;
-        }
-        if self.gathered.tasks_heard == 0
-            && let Some((step, _, _)) = &self.deciding
-        {
-            // No update heard yet: the stand-ins are for the decided step.
-            self.gathered.step = *step;
-        }
-        if self.gathered.heard_from.len() != tasks {
-            self.gathered.heard_from = vec![false; tasks];
-        }
-        self.stand_in();
-        self.gathered.tasks_heard == tasks
     }
 
     /// Every task has been heard for the current reading: decide, or let
     /// the dispatcher go on.
     async fn complete(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
-        if let Some((step, _, _)) = self.deciding.take() {
+        if let Some(Deciding { step, .. }) = self.deciding.take() {
             self.done = Some(step);
             out.count("tiles_cloned", self.gathered.update_work);
             out.record("tiles_cloned_per_reading", self.gathered.update_work);
@@ -285,57 +176,20 @@ impl Resampler {
         Ok(())
     }
 
+    /// Every task has reported its correction: resample selectively,
+    /// reassign the new set to the tasks and broadcast the decision, in
+    /// named steps.
     async fn decide(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         let g = std::mem::take(&mut self.gathered);
         let settings = self.settings.ok_or("pf.resampler: a correction before the start")?;
         let mark = g.mark.ok_or("pf.resampler: a correction without its reading")?;
-        let population = self.population.as_mut().ok_or("pf.resampler: a correction before the start")?;
+        if self.population.is_none() {
+            return Err("pf.resampler: a correction before the start".into());
+        }
         let mut slots = g.slots;
-        self.dead.resize(population.len(), false);
-        if self.replaced.iter().any(|&r| r) {
-            // After a loss, a slot nobody reported is lost too (a state in
-            // flight to or from the lost task), and a task that reported
-            // none of its slots holds nothing: it joins with this decision.
-            let mut reported = vec![false; population.len()];
-            for s in &slots {
-                if let Some(r) = reported.get_mut(s.slot) {
-                    *r = true;
-                }
-            }
-            let mut newly = 0;
-            for (slot, dead) in self.dead.iter_mut().enumerate() {
-                if !reported[slot] && !*dead {
-                    *dead = true;
-                    population.lose(slot);
-                    newly += 1;
-                }
-            }
-            if newly > 0 {
-                out.count("particles_lost", newly);
-                for (t, empty) in self.empty.iter_mut().enumerate() {
-                    let held = self.task_of.iter().enumerate().filter(|&(_, &h)| h == t);
-                    if held.clone().count() > 0 && held.clone().all(|(slot, _)| !reported[slot]) {
-                        *empty = true;
-                    }
-                }
-                tracing::warn!("pf.resampler: {newly} more particles were lost after a matcher task was");
-            }
-        }
-        for (slot, _) in self.dead.iter().enumerate().filter(|(_, d)| **d) {
-            if slots.iter().all(|s| s.slot != slot) {
-                let pose = population.node(slot).pose;
-                let nothing = Real::NEG_INFINITY;
-                slots.push(SlotReport {
-                    slot,
-                    pose,
-                    log_likelihood: nothing,
-                    evaluations: 0,
-                    bytes: 0,
-                    fit: nothing,
-                });
-            }
-        }
-        let any_dead = self.dead.iter().any(|&d| d);
+        self.lose_unreported_slots(&slots, out);
+        let any_dead = self.report_dead_slots(&mut slots);
+        let population = self.population.as_mut().expect("checked");
         slots.sort_by_key(|s| s.slot);
         if slots.len() != population.len() || slots.iter().enumerate().any(|(i, s)| s.slot != i) {
             return Err(format!(
@@ -358,24 +212,9 @@ impl Resampler {
             settings.scheme,
             settings.injection.map(|i| (i, &fits[..])),
         );
-        let tasks = self.tasks.unwrap_or(1);
         let holders = self.task_of.clone();
         if d.resampled {
-            let placements: Vec<Placement> = d
-                .parents
-                .iter()
-                .map(|&p| Placement { home: self.task_of[p], bytes: slots[p].bytes })
-                .collect();
-            let task_of = assign(&placements, tasks);
-            let m = moved(&placements, &task_of);
-            out.record("particles_moved", m.particles as u64);
-            out.record("bytes_moved", m.bytes);
-            // What the naive placement (new slot j to task j mod K) would
-            // have moved, for comparison.
-            let naive = moved(&placements, &round_robin(placements.len(), tasks));
-            out.record("bytes_moved_round_robin", naive.bytes);
-            // Without resampling every particle stays where it is.
-            self.task_of = task_of;
+            self.reassign(&d.parents, &slots, out);
         }
         out.record("resample_us", started.elapsed().as_micros() as u64);
         out.record("neff_x100", (d.neff * 100.0) as u64);
@@ -383,18 +222,9 @@ impl Resampler {
         let mean = g.busy_us.iter().sum::<u64>() as f64 / g.busy_us.len().max(1) as f64;
         let slowest = g.busy_us.iter().copied().max().unwrap_or(0);
         out.record("imbalance_us", (slowest as f64 - mean).max(0.0) as u64);
-        self.empty.resize(tasks, false);
-        let joining: Vec<u32> =
-            (0..tasks).filter(|&t| self.empty[t] && self.task_of.contains(&t)).map(|t| t as u32).collect();
-        self.standing_in.resize(tasks, false);
-        for &t in &joining {
-            // It holds its share from now on and reports for itself: the
-            // update waits for it.
-            self.empty[t as usize] = false;
-            self.standing_in[t as usize] = false;
-        }
+        let joining = self.join_empty_tasks();
         self.dead.iter_mut().for_each(|d| *d = false);
-        self.deciding = Some((g.step, d.parents.clone(), holders));
+        self.deciding = Some(Deciding { step: g.step, parents: d.parents.clone(), holders });
         let decision = Decision {
             step: g.step,
             parents: d.parents.iter().map(|&p| p as u32).collect(),
@@ -408,13 +238,46 @@ impl Resampler {
         out.record("injected", d.fresh.len() as u64);
         self.marks.push(mark);
         out.emit("decision", decision).await?;
-        let (keep, radius, turn) = self.modes;
+        let ModeSettings { keep, radius, turn } = self.modes;
         if keep > 0 {
             let poses: Vec<Pose2> = poses.iter().map(|p| p.0).collect();
             let found = modes(&poses, &d.weights, radius, turn, keep);
             out.emit("hypotheses", Hypotheses { stamp: mark.0, modes: found }).await?;
         }
         self.emit_estimate(mark, out).await
+    }
+
+    /// Places the resampled set on the tasks (Hungarian: equal load, fewest
+    /// bytes moved; `parents[j]` is new slot j's parent) and records what
+    /// moved, and what placing slot j on task j mod K would have moved.
+    fn reassign(&mut self, parents: &[usize], slots: &[SlotReport], out: &mut Emitter) {
+        let tasks = self.tasks.unwrap_or(1);
+        let placements: Vec<Placement> =
+            parents.iter().map(|&p| Placement { home: self.task_of[p], bytes: slots[p].bytes }).collect();
+        let task_of = assign(&placements, tasks);
+        let m = moved(&placements, &task_of);
+        out.record("particles_moved", m.particles as u64);
+        out.record("bytes_moved", m.bytes);
+        let naive = moved(&placements, &round_robin(placements.len(), tasks));
+        out.record("bytes_moved_round_robin", naive.bytes);
+        // Without resampling every particle stays where it is.
+        self.task_of = task_of;
+    }
+
+    /// The tasks that held nothing and are given slots by the new
+    /// placement: they hold their share from now on and report for
+    /// themselves (the update waits for them).
+    fn join_empty_tasks(&mut self) -> Vec<u32> {
+        let tasks = self.tasks.unwrap_or(1);
+        self.task_states.resize(tasks, TaskState::default());
+        let mut joining = Vec::new();
+        for (t, state) in self.task_states.iter_mut().enumerate() {
+            if state.holding != Holding::Share && self.task_of.contains(&t) {
+                state.holding = Holding::Share;
+                joining.push(t as u32);
+            }
+        }
+        joining
     }
 }
 
@@ -436,13 +299,13 @@ impl Bolt for Resampler {
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         let report = input.get::<Report>().ok_or("pf.resampler takes matcher reports")?;
         if let Some((step, task)) = report.step_and_task()
-            && self.replaced.get(task as usize) == Some(&true)
+            && self.task_states.get(task as usize).is_some_and(|s| s.replaced)
         {
             let updated = matches!(report, Report::Updated { .. });
             let late = self.done.is_some_and(|done| step <= done)
                 // A reading's report once its decision is out, or an update
                 // when no decision is: its stand-in covered it.
-                || (self.deciding.as_ref().is_some_and(|d| d.0 == step) != updated);
+                || (self.deciding.as_ref().is_some_and(|d| d.step == step) != updated);
             if late {
                 return Ok(());
             }
@@ -511,47 +374,5 @@ impl Bolt for Resampler {
             out.emit("trajectory", PoseStamped { stamp, pose }).await?;
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A resampler of `tasks` matcher tasks that has decided for `step`
-    /// and heard no update yet.
-    fn deciding(step: u64, tasks: usize) -> Resampler {
-        Resampler {
-            seed: 0,
-            tasks: Some(tasks),
-            population: None,
-            settings: None,
-            task_of: Vec::new(),
-            marks: Vec::new(),
-            gathered: Gathered::default(),
-            modes: (3, 0.5, 0.5),
-            standing_in: vec![false; tasks],
-            empty: vec![false; tasks],
-            dead: Vec::new(),
-            deciding: Some((step, Vec::new(), Vec::new())),
-            done: None,
-            replaced: vec![false; tasks],
-        }
-    }
-
-    #[test]
-    fn a_task_lost_between_a_decision_and_the_first_update_stands_in_for_that_step() {
-        let mut r = deciding(4034, 3);
-        r.standing_in[1] = true;
-        assert!(!r.count_lost_as_heard(3));
-        // The others' updates for the decided step complete it.
-        assert!(!r.heard(4034, 0, 3).unwrap());
-        assert!(r.heard(4034, 2, 3).unwrap());
-        // A report for another step while gathering is still refused.
-        let mut r = deciding(7, 3);
-        r.standing_in[0] = true;
-        r.count_lost_as_heard(3);
-        let wrong = r.heard(8, 1, 3).unwrap_err().to_string();
-        assert!(wrong.contains("a report for reading 8 while gathering 7"), "{wrong}");
     }
 }
