@@ -29,6 +29,7 @@ fn main() {
     let camera = DepthCamera::d435_on_robot();
     let mut render_rng = ChaCha8Rng::seed_from_u64(1);
     let frames: Vec<_> = Simulation::new(floor, config)
+        .expect("a valid simulation")
         .filter_map(|e| match e {
             SimEvent::Scan(scan, truth) => Some((scan.stamp, scan.odometry, truth)),
             SimEvent::Odom(_) => None,

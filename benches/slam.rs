@@ -30,6 +30,7 @@ fn aces() -> Vec<LaserReading> {
 fn simbad_like() -> Vec<LaserReading> {
     let config = SimConfig { seed: 1, duration_secs: 60.0, beams: 640, ..SimConfig::default() };
     Simulation::new(office(1, 3, 2), config)
+        .expect("a valid simulation")
         .filter_map(|e| match e {
             SimEvent::Scan(s, _) => Some(s),
             SimEvent::Odom(_) => None,

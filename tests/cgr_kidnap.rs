@@ -28,6 +28,7 @@ fn kidnapped(world: &str, at: f64, skip: f64, particles: usize) -> (f64, Vec<f64
     let config =
         SimConfig { seed: 4, duration_secs: at + skip + 40.0, scan_hz: SCAN_HZ, ..SimConfig::default() };
     let events: Vec<(Observation2d, Pose2)> = Simulation::new(floor, config)
+        .unwrap()
         .filter_map(|e| match e {
             SimEvent::Scan(s, truth) => Some((Observation2d::from_laser(&s, 8.0), truth)),
             SimEvent::Odom(_) => None,

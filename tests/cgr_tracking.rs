@@ -18,6 +18,7 @@ fn track(shards: usize) -> (f64, f64, f64, Vec<Pose2>) {
     let map = Arc::new(floor.world.clone());
     let config = SimConfig { seed: 4, duration_secs: 120.0, ..SimConfig::default() };
     let events: Vec<(Observation2d, Pose2)> = Simulation::new(floor, config)
+        .unwrap()
         .filter_map(|e| match e {
             SimEvent::Scan(s, truth) => Some((Observation2d::from_laser(&s, 8.0), truth)),
             SimEvent::Odom(_) => None,

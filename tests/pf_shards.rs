@@ -52,6 +52,7 @@ fn assert_shards_agree(
 fn shards_reproduce_the_serial_filter_on_the_simulator() {
     let config = SimConfig { seed: 2, duration_secs: 90.0, ..SimConfig::default() };
     let scans: Vec<LaserReading> = Simulation::new(office(2, 2, 2), config)
+        .unwrap()
         .filter_map(|e| match e {
             SimEvent::Scan(s, _) => Some(s),
             SimEvent::Odom(_) => None,

@@ -10,7 +10,7 @@ use squall::spouts::sim::{SimConfig, SimEvent, Simulation};
 #[test]
 fn slam_beats_odometry_on_a_simulated_office() {
     let config = SimConfig { seed: 3, duration_secs: 180.0, ..SimConfig::default() };
-    let sim = Simulation::new(office(3, 3, 2), config);
+    let sim = Simulation::new(office(3, 3, 2), config).unwrap();
     let options = SlamOptions { particles: 10, max_urange: 30.0, ..SlamOptions::default() };
     let mut filter = Rbpf::new(options, 7).unwrap();
     let (mut truth, mut odometry, mut slam) =
@@ -45,7 +45,7 @@ fn a_simulated_run_closes_its_loops() {
     use squall::spouts::sim::output::relations;
 
     let config = SimConfig { seed: 5, duration_secs: 300.0, ..SimConfig::default() };
-    let sim = Simulation::new(office(3, 3, 2), config);
+    let sim = Simulation::new(office(3, 3, 2), config).unwrap();
     let options = SlamOptions { particles: 15, max_urange: 30.0, ..SlamOptions::default() };
     let mut filter = Rbpf::new(options, 11).unwrap();
     let (mut truth, mut odometry, mut scans) = (Trajectory::default(), Trajectory::default(), Vec::new());

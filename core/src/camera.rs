@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real};
-use crate::textfile::TextFileError;
+use crate::{Error, Result};
 
 /// A pinhole camera: focal lengths and principal point, pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,23 +41,24 @@ pub struct DepthImage {
 
 impl DepthImage {
     /// Reads a 16-bit greyscale PNG (millimetres).
-    pub fn load_png(path: &Path) -> Result<Self, TextFileError> {
-        let name = path.display().to_string();
-        let bad = |message: String| TextFileError::Bad { path: name.clone(), line: 0, message };
-        let file = std::fs::File::open(path).map_err(|e| bad(format!("cannot open: {e}")))?;
+    pub fn load_png(path: &Path) -> Result<Self> {
+        let name = || path.display().to_string();
+        let file = std::fs::File::open(path).map_err(|source| Error::ImageOpen { path: name(), source })?;
         let mut reader = png::Decoder::new(std::io::BufReader::new(file))
             .read_info()
-            .map_err(|e| bad(format!("not a PNG: {e}")))?;
+            .map_err(|source| Error::NotPng { path: name(), source })?;
         let info = reader.info();
         if info.bit_depth != png::BitDepth::Sixteen || info.color_type != png::ColorType::Grayscale {
-            return Err(bad(format!(
-                "expected a 16-bit greyscale depth image, found {:?} {:?}",
-                info.bit_depth, info.color_type
-            )));
+            return Err(Error::DepthFormat {
+                path: name(),
+                bit_depth: info.bit_depth,
+                color_type: info.color_type,
+            });
         }
         let (width, height) = (info.width as usize, info.height as usize);
-        let mut buf = vec![0; reader.output_buffer_size().ok_or_else(|| bad("image too large".into()))?];
-        reader.next_frame(&mut buf).map_err(|e| bad(format!("cannot decode: {e}")))?;
+        let mut buf =
+            vec![0; reader.output_buffer_size().ok_or_else(|| Error::ImageTooLarge { path: name() })?];
+        reader.next_frame(&mut buf).map_err(|source| Error::ImageDecode { path: name(), source })?;
         let depth_mm =
             buf.chunks_exact(2).take(width * height).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
         Ok(DepthImage { width, height, depth_mm })
@@ -65,6 +66,11 @@ impl DepthImage {
 
     /// The camera-frame point of pixel (`row`, `col`) (x right, y down,
     /// z forward, metres), if it has depth.
+    ///
+    /// # Panics
+    ///
+    /// If the pixel lies outside the image, as slice indexing does: pixel
+    /// loops run over the image's own rows and columns.
     #[inline]
     pub fn point(&self, row: usize, col: usize, k: &Intrinsics) -> Option<[f32; 3]> {
         let d = self.depth_mm[row * self.width + col];
@@ -99,4 +105,41 @@ pub struct DepthFrame {
     pub odometry: Pose2,
     /// The image.
     pub image: DepthImage,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-row greyscale PNG of `depth` bits holding `samples`.
+    fn png_file(dir: &Path, name: &str, depth: png::BitDepth, samples: &[u8]) -> std::path::PathBuf {
+        let path = dir.join(name);
+        let per_pixel = if depth == png::BitDepth::Sixteen { 2 } else { 1 };
+        let mut encoder =
+            png::Encoder::new(std::fs::File::create(&path).unwrap(), (samples.len() / per_pixel) as u32, 1);
+        encoder.set_color(png::ColorType::Grayscale);
+        encoder.set_depth(depth);
+        encoder.write_header().unwrap().write_image_data(samples).unwrap();
+        path
+    }
+
+    #[test]
+    fn depth_pngs_load_and_other_files_say_why_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = png_file(dir.path(), "d.png", png::BitDepth::Sixteen, &[0x03, 0xe8, 0, 0]);
+        let image = DepthImage::load_png(&good).unwrap();
+        assert_eq!((image.width, image.height, image.depth_mm), (2, 1, vec![1000, 0]));
+
+        let name = |f: &str| dir.path().join(f).display().to_string();
+        let missing = DepthImage::load_png(&dir.path().join("none.png")).unwrap_err().to_string();
+        assert!(missing.starts_with(&format!("{}:0: cannot open: ", name("none.png"))), "{missing}");
+        std::fs::write(dir.path().join("t.png"), "not an image").unwrap();
+        let text = DepthImage::load_png(&dir.path().join("t.png")).unwrap_err().to_string();
+        assert!(text.starts_with(&format!("{}:0: not a PNG: ", name("t.png"))), "{text}");
+        let grey = png_file(dir.path(), "g.png", png::BitDepth::Eight, &[1, 2]);
+        assert_eq!(
+            DepthImage::load_png(&grey).unwrap_err().to_string(),
+            format!("{}:0: expected a 16-bit greyscale depth image, found Eight Grayscale", name("g.png"))
+        );
+    }
 }

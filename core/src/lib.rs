@@ -10,6 +10,7 @@
 
 pub mod camera;
 pub mod depth_render;
+mod error;
 pub mod eval;
 pub mod geometry;
 pub mod linemap;
@@ -21,3 +22,5 @@ pub mod sensor;
 pub mod textfile;
 pub mod trajectory;
 pub mod visibility;
+
+pub use error::{Error, Result};

@@ -10,6 +10,7 @@ use squall_topology::fsio::write_atomic;
 
 use crate::geometry::{Pose2, line_cells};
 use crate::occupancy::{OccupancyGrid, UNKNOWN};
+use crate::{Error, Result};
 
 /// Occupancy (percent) at or above which a cell is drawn occupied.
 pub const OCCUPIED_PERCENT: i8 = 65;
@@ -25,24 +26,28 @@ fn pixel(value: i8) -> u8 {
     }
 }
 
-/// Grey pixels, top row first.
-pub fn grey_pixels(grid: &OccupancyGrid) -> Vec<u8> {
-    let mut out = Vec::with_capacity(grid.width * grid.height);
+/// Grey pixels, top row first. An error if the grid holds fewer cells
+/// than its width × height.
+pub fn grey_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>> {
+    let Some(size) = grid.width.checked_mul(grid.height).filter(|&n| n <= grid.cells.len()) else {
+        return Err(Error::GridShape { width: grid.width, height: grid.height, cells: grid.cells.len() });
+    };
+    let mut out = Vec::with_capacity(size);
     for row in (0..grid.height).rev() {
         out.extend(grid.cells[row * grid.width..(row + 1) * grid.width].iter().map(|&v| pixel(v)));
     }
-    out
+    Ok(out)
 }
 
 /// Writes `DIR/STEM.pgm` and `DIR/STEM.yaml` (atomically).
-pub fn write_pgm_yaml(grid: &OccupancyGrid, dir: &Path, stem: &str) -> std::io::Result<()> {
+pub fn write_pgm_yaml(grid: &OccupancyGrid, dir: &Path, stem: &str) -> Result<()> {
     let mut pgm = format!(
         "P5\n# squall occupancy map, {} m/cell\n{} {}\n255\n",
         grid.resolution, grid.width, grid.height
     )
     .into_bytes();
-    pgm.extend(grey_pixels(grid));
-    write_atomic(&dir.join(format!("{stem}.pgm")), &pgm)?;
+    pgm.extend(grey_pixels(grid)?);
+    write_file(&dir.join(format!("{stem}.pgm")), &pgm)?;
     let yaml = format!(
         "image: {stem}.pgm\nmode: trinary\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: {}\nfree_thresh: {}\n",
         grid.resolution,
@@ -51,13 +56,18 @@ pub fn write_pgm_yaml(grid: &OccupancyGrid, dir: &Path, stem: &str) -> std::io::
         f64::from(OCCUPIED_PERCENT) / 100.0,
         f64::from(FREE_PERCENT) / 100.0,
     );
-    write_atomic(&dir.join(format!("{stem}.yaml")), yaml.as_bytes())
+    write_file(&dir.join(format!("{stem}.yaml")), yaml.as_bytes())
+}
+
+/// Writes `bytes` to `path` atomically; an error names the file.
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, bytes).map_err(|source| Error::Write { path: path.to_path_buf(), source })
 }
 
 /// Encodes the map as PNG; with a trajectory, as RGB with the path drawn
 /// in red.
-pub fn png_bytes(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Result<Vec<u8>, png::EncodingError> {
-    let grey = grey_pixels(grid);
+pub fn png_bytes(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Result<Vec<u8>> {
+    let grey = grey_pixels(grid)?;
     let (w, h) = (grid.width as u32, grid.height as u32);
     let mut out = Vec::new();
     {
@@ -77,9 +87,9 @@ pub fn png_bytes(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Result<Vec<u8>, 
 }
 
 /// Writes `path` as PNG (atomically).
-pub fn write_png(grid: &OccupancyGrid, trajectory: &[Pose2], path: &Path) -> std::io::Result<()> {
-    let bytes = png_bytes(grid, trajectory).map_err(std::io::Error::other)?;
-    write_atomic(path, &bytes)
+pub fn write_png(grid: &OccupancyGrid, trajectory: &[Pose2], path: &Path) -> Result<()> {
+    let bytes = png_bytes(grid, trajectory)?;
+    write_file(path, &bytes)
 }
 
 /// Image pixel (column, row from the top) of a world point, if inside.
@@ -132,6 +142,17 @@ mod tests {
         let yaml = std::fs::read_to_string(dir.path().join("map.yaml")).unwrap();
         assert!(yaml.contains("image: map.pgm\n") && yaml.contains("resolution: 0.5\n"), "{yaml}");
         assert!(yaml.contains("origin: [-1, 2, 0.0]\n"), "{yaml}");
+    }
+
+    #[test]
+    fn a_grid_short_of_cells_is_an_error() {
+        let mut g = grid();
+        g.cells.truncate(11);
+        let e = png_bytes(&g, &[]).unwrap_err();
+        assert_eq!(e.to_string(), "an occupancy grid of 4 × 3 cells holds 11");
+        let dir = tempfile::tempdir().unwrap();
+        assert!(matches!(write_pgm_yaml(&g, dir.path(), "map"), Err(Error::GridShape { cells: 11, .. })));
+        assert!(!dir.path().join("map.pgm").exists());
     }
 
     #[test]

@@ -31,11 +31,21 @@ impl OccupancyGrid {
     }
 
     /// The cell at column `x`, row `y`.
+    ///
+    /// # Panics
+    ///
+    /// If the cell lies outside the grid, as slice indexing does: callers
+    /// index with cells they got from the grid ([`cell_of`](Self::cell_of),
+    /// its width and height); checking again would cost the hot loops.
     pub fn get(&self, x: usize, y: usize) -> i8 {
         self.cells[y * self.width + x]
     }
 
     /// Sets the cell at column `x`, row `y`.
+    ///
+    /// # Panics
+    ///
+    /// If the cell lies outside the grid (see [`get`](Self::get)).
     pub fn set(&mut self, x: usize, y: usize, value: i8) {
         self.cells[y * self.width + x] = value;
     }

@@ -13,45 +13,70 @@ use squall_core::linemap::LineMap;
 use squall_core::sensor::PoseStamped;
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
+use crate::sim::office::Floor;
 use crate::sim::people::Crowd;
-use crate::sim::{SimConfig, SimEvent, Simulation, floor_for};
+use crate::sim::{DEFAULT_WORLD, SimConfig, SimEvent, Simulation, floor_for};
+use crate::{Error, Result};
 
+/// The `depth_sim` spout's params; a param left out takes its value from
+/// [`P::default`].
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 struct P {
-    /// `"office"` or a line-map file.
-    #[serde(default = "default_world")]
+    /// `"office"` or a line-map file. The default is [`DEFAULT_WORLD`],
+    /// `"office"`.
     world: String,
     /// Simulated seconds. The default is 60.
-    #[serde(default = "default_duration")]
     duration_secs: f64,
     /// Frames per second. The default is 10.
-    #[serde(default = "default_rate")]
     frame_hz: f64,
     /// Boxes scattered on the floor. The default is 20.
-    #[serde(default = "default_boxes")]
     boxes: usize,
     /// People walking about. The default is 5.
-    #[serde(default = "default_people")]
     people: usize,
-    /// Seed; the default is the topology's.
+    /// Seed; the default (`None`) is the topology's.
     seed: Option<u64>,
 }
 
-fn default_world() -> String {
-    "office".into()
+impl Default for P {
+    fn default() -> Self {
+        P {
+            world: DEFAULT_WORLD.into(),
+            duration_secs: 60.0,
+            frame_hz: 10.0,
+            boxes: 20,
+            people: 5,
+            seed: None,
+        }
+    }
 }
-fn default_duration() -> f64 {
-    60.0
-}
-fn default_rate() -> f64 {
-    10.0
-}
-fn default_boxes() -> usize {
-    20
-}
-fn default_people() -> usize {
-    5
+
+/// Places tried in a row for one box before `depth_sim` gives up: on a map
+/// with room for boxes a place is found within a few tries.
+const BOX_TRIES: u64 = 100_000;
+
+/// `count` boxes at random places of `floor`'s map, each more than 1 m
+/// from every node of its roadmap (so the robot's route stays clear); the
+/// places are drawn from `seed`. An error when [`BOX_TRIES`] places in a
+/// row are all too near the roadmap: the map has no room for them.
+fn place_boxes(floor: &Floor, count: usize, seed: u64) -> Result<Vec<Clutter>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xb0e5);
+    let (x0, y0, x1, y1) = floor.world.bounds();
+    let mut boxes = Vec::new();
+    boxes.try_reserve_exact(count).map_err(|_| Error::TooMany { count, what: "boxes" })?;
+    let mut tries = 0;
+    while boxes.len() < count {
+        if tries == BOX_TRIES {
+            return Err(Error::NoRoomForBoxes { placed: boxes.len(), wanted: count, tries });
+        }
+        tries += 1;
+        let (x, y) = (x0 + rng.random::<f64>() * (x1 - x0), y0 + rng.random::<f64>() * (y1 - y0));
+        if floor.nodes.iter().all(|n| (n.0 - x).hypot(n.1 - y) > 1.0) {
+            boxes.push(Clutter { min: (x, y), max: (x + 0.4, y + 0.4), height: 0.6 });
+            tries = 0;
+        }
+    }
+    Ok(boxes)
 }
 
 /// Emits depth frames along a simulated route.
@@ -96,16 +121,7 @@ impl Spout for DepthSimSpout {
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
         let floor = floor_for(&self.p.world, self.seed)?;
         let map = floor.world.clone();
-        // Boxes at random places of the map, kept off the roadmap's nodes.
-        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0xb0e5);
-        let (x0, y0, x1, y1) = map.bounds();
-        let mut boxes = Vec::with_capacity(self.p.boxes);
-        while boxes.len() < self.p.boxes {
-            let (x, y) = (x0 + rng.random::<f64>() * (x1 - x0), y0 + rng.random::<f64>() * (y1 - y0));
-            if floor.nodes.iter().all(|n| (n.0 - x).hypot(n.1 - y) > 1.0) {
-                boxes.push(Clutter { min: (x, y), max: (x + 0.4, y + 0.4), height: 0.6 });
-            }
-        }
+        let boxes = place_boxes(&floor, self.p.boxes, self.seed)?;
         let config = SimConfig {
             seed: self.seed,
             duration_secs: self.p.duration_secs,
@@ -116,9 +132,9 @@ impl Spout for DepthSimSpout {
         };
         config.check()?;
         ctx.expect_emits(2 * (self.p.duration_secs * self.p.frame_hz) as u64);
-        let crowd = Crowd::new(&floor, self.p.people, self.seed);
+        let crowd = Crowd::new(&floor, self.p.people, self.seed)?;
         self.sim = Some(World {
-            sim: Simulation::new(floor, config),
+            sim: Simulation::new(floor, config)?,
             map,
             boxes,
             crowd,
@@ -147,5 +163,33 @@ impl Spout for DepthSimSpout {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_left_out_take_the_documented_defaults() {
+        let p: P = Params::new(toml::Table::new(), 7, 1).parse().unwrap();
+        assert_eq!((p.world.as_str(), p.duration_secs, p.frame_hz), ("office", 60.0, 10.0));
+        assert_eq!((p.boxes, p.people, p.seed), (20, 5, None));
+        let unknown = Params::new(toml::from_str("box = 3").unwrap(), 7, 1).parse::<P>().unwrap_err();
+        assert!(unknown.to_string().starts_with("unknown field `box`"), "{unknown}");
+    }
+
+    #[test]
+    fn boxes_keep_off_the_roadmap_or_say_there_is_no_room() {
+        let floor = crate::sim::office::office(3, 3, 2);
+        let boxes = place_boxes(&floor, 20, 3).unwrap();
+        assert_eq!(boxes.len(), 20);
+        assert!(boxes.iter().all(|b| floor.nodes.iter().all(|n| (n.0 - b.min.0).hypot(n.1 - b.min.1) > 1.0)));
+        // A 2.5 m room: every point lies within 1 m of its roadmap.
+        let room = LineMap::parse("room", "0,0,2.5,0\n2.5,0,2.5,2.5\n2.5,2.5,0,2.5\n0,2.5,0,0\n").unwrap();
+        let small = crate::sim::roadmap::roadmap(room, 0.5, 0.35).unwrap();
+        let e = place_boxes(&small, 1, 3).unwrap_err();
+        assert_eq!(e.to_string(), "no place for box 1 of 1 at least 1 m from the roadmap after 100000 tries");
+        assert!(place_boxes(&small, 0, 3).unwrap().is_empty());
     }
 }

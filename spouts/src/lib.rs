@@ -3,10 +3,13 @@
 
 pub mod carmen;
 pub mod depth;
+mod error;
 #[cfg(feature = "cluster")]
 pub mod live;
 pub mod rosbag2;
 pub mod sim;
+
+pub use error::{Error, Result};
 
 use squall_topology::Registry;
 

@@ -12,7 +12,7 @@ use squall_spouts::sim::{SimConfig, SimEvent, Simulation};
 fn run(seed: u64, secs: f64) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let config = SimConfig { seed, duration_secs: secs, ..SimConfig::default() };
-    write_run(Simulation::new(office(seed, 3, 2), config), dir.path()).unwrap();
+    write_run(Simulation::new(office(seed, 3, 2), config).unwrap(), dir.path()).unwrap();
     dir
 }
 
@@ -69,7 +69,8 @@ fn routes_close_loops() {
 fn the_laser_sees_the_walls_from_the_true_pose() {
     let floor = office(3, 3, 2);
     let world = floor.world.clone();
-    let sim = Simulation::new(floor, SimConfig { seed: 3, duration_secs: 20.0, ..SimConfig::default() });
+    let sim =
+        Simulation::new(floor, SimConfig { seed: 3, duration_secs: 20.0, ..SimConfig::default() }).unwrap();
     let mut checked = 0;
     for event in sim {
         if let SimEvent::Scan(scan, truth) = event {

@@ -120,11 +120,12 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
 /// Where the simulated robot starts (the simulator is deterministic per
 /// seed: this is the pose of its first scan).
 fn first_true_pose(map: &str, args: &LocalizeArgs) -> Result<(f64, f64, f64), String> {
-    let floor = floor_for(map, args.seed)?;
+    let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
     let config =
         SimConfig { seed: args.seed, duration_secs: args.duration, range_max: 8.0, ..SimConfig::default() };
-    config.check()?;
+    // `new` checks the config first, as `config.check()` did here.
     Simulation::new(floor, config)
+        .map_err(|e| e.to_string())?
         .find_map(|e| match e {
             SimEvent::Scan(_, truth) => Some((truth.x, truth.y, truth.theta)),
             SimEvent::Odom(_) => None,

@@ -55,7 +55,13 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let sim = Simulation::new(floor, config);
+    let sim = match Simulation::new(floor, config) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
     match write_run(sim, &args.out) {
         Ok(s) => {
             println!(

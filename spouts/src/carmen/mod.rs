@@ -14,7 +14,7 @@ use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
-pub use parse::{Laser, LineParser, Record};
+pub use parse::{Laser, LineParser, Record, RecordError};
 pub use reader::{LogError, LogReader, ReadOptions, read_front_scans, read_log};
 
 /// How fast the spout replays.
@@ -37,15 +37,13 @@ struct CarmenParams {
     /// Skip malformed records (counted) instead of failing.
     #[serde(default)]
     skip_bad: bool,
-    /// Range limit (m) when the log gives none. The default is 80.
-    #[serde(default = "default_range_max")]
-    range_max: f64,
+    /// Range limit (m) when the log gives none. The default is
+    /// [`ReadOptions::default`]'s, 80. (An `Option` rather than a
+    /// `#[serde(default)]` on the struct: `log` has no default and must
+    /// stay required.)
+    range_max: Option<f64>,
     /// Stop after this many front scans.
     max_scans: Option<u64>,
-}
-
-fn default_range_max() -> f64 {
-    80.0
 }
 
 /// Parses a `rate` parameter: `"max"` or a positive factor.
@@ -76,13 +74,14 @@ impl CarmenSpout {
     /// Builds the spout from its `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: CarmenParams = p.parse()?;
-        if !(params.range_max.is_finite() && params.range_max > 0.0) {
+        let range_max = params.range_max.unwrap_or(ReadOptions::default().default_range_max);
+        if !(range_max.is_finite() && range_max > 0.0) {
             return Err(ParamError::new("range_max must be a positive number of metres"));
         }
         Ok(CarmenSpout {
             pace: pace(params.rate.as_ref())?,
             log: params.log,
-            options: ReadOptions { default_range_max: params.range_max, skip_bad: params.skip_bad },
+            options: ReadOptions { default_range_max: range_max, skip_bad: params.skip_bad },
             max_scans: params.max_scans,
             reader: None,
             scans: 0,
@@ -156,5 +155,15 @@ mod tests {
         assert_eq!(pace(Some(&toml::Value::Integer(1))).unwrap(), Pace::Recorded(1.0));
         assert!(pace(Some(&toml::Value::Float(-1.0))).is_err());
         assert!(pace(Some(&toml::Value::String("fast".into()))).is_err());
+    }
+
+    #[test]
+    fn range_max_defaults_to_the_readers_and_must_be_positive() {
+        let spout = |text: &str| CarmenSpout::from_params(&Params::new(toml::from_str(text).unwrap(), 1, 1));
+        assert_eq!(spout("log = \"a.clf\"").unwrap().options.default_range_max, 80.0);
+        assert_eq!(spout("log = \"a.clf\"\nrange_max = 30").unwrap().options.default_range_max, 30.0);
+        let e = spout("log = \"a.clf\"\nrange_max = 0").unwrap_err();
+        assert_eq!(e.to_string(), "range_max must be a positive number of metres");
+        assert_eq!(spout("range_max = 30").unwrap_err().to_string(), "missing field `log`");
     }
 }

@@ -44,6 +44,79 @@ pub enum Record {
     Other(String),
 }
 
+/// What is wrong with a line: what was expected and what was found. A
+/// [`LogError`](super::LogError) adds the file and line.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RecordError {
+    /// A record with more or fewer fields than its layout has.
+    #[error(
+        "{keyword} {layout} needs {expected} fields after the keyword, found {found}{}",
+        if .found < .expected { " (line cut off?)" } else { "" }
+    )]
+    FieldCount {
+        /// The message type (`ODOM`, `FLASER`, ...).
+        keyword: String,
+        /// The fields expected, or how many readings they hold.
+        layout: String,
+        /// Fields expected after the keyword.
+        expected: usize,
+        /// Fields found.
+        found: usize,
+    },
+    /// A field that must be a finite number is not.
+    #[error("{keyword}: expected a number for {what} (field {field}), found \"{found}\"")]
+    NotANumber {
+        /// The message type.
+        keyword: String,
+        /// What the field holds.
+        what: &'static str,
+        /// 1-based field after the keyword.
+        field: usize,
+        /// The text found.
+        found: String,
+    },
+    /// A field that must be a count (of readings) is not.
+    #[error("{keyword}: expected a count for {what} (field {field}), found \"{found}\"")]
+    NotACount {
+        /// The message type.
+        keyword: String,
+        /// What the count counts.
+        what: &'static str,
+        /// 1-based field after the keyword.
+        field: usize,
+        /// The text found.
+        found: String,
+    },
+    /// The line ends before a field the rest of the layout depends on.
+    #[error("{keyword}: missing {what} (line cut off?)")]
+    Missing {
+        /// The message type.
+        keyword: String,
+        /// The missing field.
+        what: &'static str,
+    },
+    /// A scan of fewer than 2 readings: its beams have no spacing.
+    #[error("{keyword}: a scan needs at least 2 readings, found {found}")]
+    TooFewReadings {
+        /// The message type.
+        keyword: String,
+        /// Readings found.
+        found: usize,
+    },
+    /// A `PARAM` line without both a name and a value.
+    #[error("PARAM needs a name and a value")]
+    ParamIncomplete,
+    /// A laser geometry `PARAM` whose value is not a number.
+    #[error("PARAM {name}: expected a number, found \"{value}\"")]
+    ParamNotANumber {
+        /// The parameter.
+        name: String,
+        /// Its value.
+        value: String,
+    },
+}
+
 /// Beam geometry of one laser, from PARAM lines or defaults.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Geometry {
@@ -70,7 +143,7 @@ impl LineParser {
 
     /// Parses one line (without its newline). `Ok(None)` for blank lines
     /// and comments; `Err` says what was expected.
-    pub fn parse(&mut self, line: &str) -> Result<Option<Record>, String> {
+    pub fn parse(&mut self, line: &str) -> Result<Option<Record>, RecordError> {
         let line = line.trim_end_matches('\r');
         let mut fields = line.split_ascii_whitespace();
         let Some(keyword) = fields.next() else { return Ok(None) };
@@ -96,7 +169,7 @@ impl LineParser {
         }
     }
 
-    fn apply_param(&mut self, name: &str, value: &str) -> Result<(), String> {
+    fn apply_param(&mut self, name: &str, value: &str) -> Result<(), RecordError> {
         let target = match name {
             "laser_front_laser_angle_min" => &mut self.front.angle_min,
             "laser_front_laser_angle_increment" => &mut self.front.angle_increment,
@@ -106,8 +179,9 @@ impl LineParser {
             "robot_rear_laser_max" => &mut self.rear.range_max,
             _ => return Ok(()),
         };
-        let v: Real =
-            value.parse().map_err(|_| format!("PARAM {name}: expected a number, found \"{value}\""))?;
+        let v: Real = value
+            .parse()
+            .map_err(|_| RecordError::ParamNotANumber { name: name.to_string(), value: value.to_string() })?;
         *target = Some(v);
         Ok(())
     }
@@ -119,48 +193,58 @@ struct Fields<'a> {
 }
 
 impl<'a> Fields<'a> {
-    fn expect_len(&self, n: usize, what: &str) -> Result<(), String> {
+    fn expect_len(&self, n: usize, layout: impl Into<String>) -> Result<(), RecordError> {
         if self.items.len() == n {
             Ok(())
         } else {
-            Err(format!(
-                "{} {what} needs {n} fields after the keyword, found {}{}",
-                self.keyword,
-                self.items.len(),
-                if self.items.len() < n { " (line cut off?)" } else { "" }
-            ))
+            Err(RecordError::FieldCount {
+                keyword: self.keyword.to_string(),
+                layout: layout.into(),
+                expected: n,
+                found: self.items.len(),
+            })
         }
     }
 
-    fn num(&self, i: usize, what: &str) -> Result<Real, String> {
-        let s = self.items[i];
+    fn num(&self, i: usize, what: &'static str) -> Result<Real, RecordError> {
+        // Callers check the field count first; a line cut off still gives
+        // an error, never a panic.
+        let Some(&s) = self.items.get(i) else {
+            return Err(RecordError::Missing { keyword: self.keyword.to_string(), what });
+        };
         match s.parse::<Real>() {
             Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(format!(
-                "{}: expected a number for {what} (field {}), found \"{s}\"",
-                self.keyword,
-                i + 1
-            )),
+            _ => Err(RecordError::NotANumber {
+                keyword: self.keyword.to_string(),
+                what,
+                field: i + 1,
+                found: s.to_string(),
+            }),
         }
     }
 
-    fn count(&self, i: usize, what: &str) -> Result<usize, String> {
-        let s =
-            self.items.get(i).ok_or_else(|| format!("{}: missing {what} (line cut off?)", self.keyword))?;
-        s.parse::<usize>().map_err(|_| {
-            format!("{}: expected a count for {what} (field {}), found \"{s}\"", self.keyword, i + 1)
+    fn count(&self, i: usize, what: &'static str) -> Result<usize, RecordError> {
+        let &s = self
+            .items
+            .get(i)
+            .ok_or_else(|| RecordError::Missing { keyword: self.keyword.to_string(), what })?;
+        s.parse::<usize>().map_err(|_| RecordError::NotACount {
+            keyword: self.keyword.to_string(),
+            what,
+            field: i + 1,
+            found: s.to_string(),
         })
     }
 
-    fn pose(&self, i: usize, what: &str) -> Result<Pose2, String> {
+    fn pose(&self, i: usize, what: &'static str) -> Result<Pose2, RecordError> {
         Ok(Pose2::new(self.num(i, what)?, self.num(i + 1, what)?, self.num(i + 2, what)?))
     }
 
-    fn ranges(&self, from: usize, n: usize) -> Result<Vec<f32>, String> {
-        (from..from + n).map(|i| self.num(i, "a range").map(|r| r as f32)).collect()
+    fn ranges(&self, from: usize, n: usize) -> Result<Vec<f32>, RecordError> {
+        (from..from.saturating_add(n)).map(|i| self.num(i, "a range").map(|r| r as f32)).collect()
     }
 
-    fn odom(&self) -> Result<Odometry, String> {
+    fn odom(&self) -> Result<Odometry, RecordError> {
         self.expect_len(9, "(x y theta tv rv accel ipc_timestamp host logger_timestamp)")?;
         Ok(Odometry {
             pose: self.pose(0, "the pose")?,
@@ -170,12 +254,14 @@ impl<'a> Fields<'a> {
         })
     }
 
-    fn flaser(&self, geometry: &Geometry, default_range_max: Real) -> Result<LaserReading, String> {
+    fn flaser(&self, geometry: &Geometry, default_range_max: Real) -> Result<LaserReading, RecordError> {
         let n = self.count(0, "num_readings")?;
         if n < 2 {
-            return Err(format!("{}: a scan needs at least 2 readings, found {n}", self.keyword));
+            return Err(RecordError::TooFewReadings { keyword: self.keyword.to_string(), found: n });
         }
-        self.expect_len(n + 10, &format!("with {n} readings"))?;
+        // Saturating: a count near usize::MAX is simply more fields than
+        // the line has.
+        self.expect_len(n.saturating_add(10), format!("with {n} readings"))?;
         let ranges = self.ranges(1, n)?;
         let laser = self.pose(n + 1, "the laser pose")?;
         let odometry = self.pose(n + 4, "the odometry pose")?;
@@ -191,10 +277,14 @@ impl<'a> Fields<'a> {
         })
     }
 
-    fn robotlaser1(&self) -> Result<LaserReading, String> {
+    fn robotlaser1(&self) -> Result<LaserReading, RecordError> {
         let n = self.count(7, "num_readings")?;
-        let m = self.count(8 + n, "num_remissions")?;
-        self.expect_len(8 + n + 1 + m + 14, &format!("with {n} readings and {m} remissions"))?;
+        let m = self.count(n.saturating_add(8), "num_remissions")?;
+        // `m` was found after the `n` readings, so `n + 9` cannot overflow;
+        // saturating, an absurd `m` is simply more fields than the line has.
+        // Once the count matches, every index below is within the line.
+        let fields = (n + 9).saturating_add(m).saturating_add(14);
+        self.expect_len(fields, format!("with {n} readings and {m} remissions"))?;
         let start_angle = self.num(1, "start_angle")?;
         let resolution = self.num(3, "angular_resolution")?;
         let range_max = self.num(4, "maximum_range")?;
@@ -214,9 +304,9 @@ impl<'a> Fields<'a> {
         })
     }
 
-    fn param(&self) -> Result<(String, String), String> {
+    fn param(&self) -> Result<(String, String), RecordError> {
         if self.items.len() < 2 {
-            return Err("PARAM needs a name and a value".to_string());
+            return Err(RecordError::ParamIncomplete);
         }
         Ok((self.items[0].to_string(), self.items[1].to_string()))
     }
@@ -274,19 +364,38 @@ mod tests {
     }
 
     #[test]
+    fn absurd_counts_are_errors_not_overflows() {
+        let mut p = LineParser::new(80.0);
+        let max = usize::MAX;
+        let e = p.parse(&format!("FLASER {max} 1 2 3 4 5 6 7 8 9 10 11")).unwrap_err().to_string();
+        assert!(e.starts_with(&format!("FLASER with {max} readings needs {max} fields")), "{e}");
+        let e = p.parse(&format!("ROBOTLASER1 0 0 0 0 0 0 0 {max} 1 2")).unwrap_err();
+        assert_eq!(e.to_string(), "ROBOTLASER1: missing num_remissions (line cut off?)");
+        let e = p.parse(&format!("ROBOTLASER1 0 0 0 0 0 0 0 1 5 {max} 0 0 0")).unwrap_err().to_string();
+        assert!(e.contains(&format!("with 1 readings and {max} remissions needs")), "{e}");
+    }
+
+    #[test]
     fn cut_off_and_malformed_lines_say_what_was_expected() {
         let mut p = LineParser::new(80.0);
-        let e = p.parse("FLASER 180 1.0 2.0 3.0").unwrap_err();
+        let e = p.parse("FLASER 180 1.0 2.0 3.0").unwrap_err().to_string();
         assert!(
             e.contains(
                 "FLASER with 180 readings needs 190 fields after the keyword, found 4 (line cut off?)"
             ),
             "{e}"
         );
-        let e = p.parse("ODOM 1 2 x 0 0 0 1 h 1").unwrap_err();
+        let e = p.parse("ODOM 1 2 x 0 0 0 1 h 1").unwrap_err().to_string();
         assert!(e.contains("expected a number for the pose (field 3), found \"x\""), "{e}");
-        let e = p.parse("FLASER many 1 2").unwrap_err();
+        let e = p.parse("FLASER many 1 2").unwrap_err().to_string();
         assert!(e.contains("expected a count for num_readings"), "{e}");
+        let e = p.parse("PARAM robot_front_laser_max far h 0").unwrap_err();
+        assert_eq!(e.to_string(), "PARAM robot_front_laser_max: expected a number, found \"far\"");
+        assert_eq!(p.parse("PARAM x").unwrap_err(), RecordError::ParamIncomplete);
+        assert_eq!(
+            p.parse("FLASER 1 5 0 0 0 0 0 0 1 h 1").unwrap_err().to_string(),
+            "FLASER: a scan needs at least 2 readings, found 1"
+        );
         assert_eq!(p.parse("   ").unwrap(), None);
         assert_eq!(p.parse("# comment").unwrap(), None);
         assert_eq!(p.parse("SYNC 1 2").unwrap(), Some(Record::Other("SYNC".into())));

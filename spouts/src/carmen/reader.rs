@@ -9,7 +9,7 @@ use flate2::read::MultiGzDecoder;
 
 use squall_core::sensor::LaserReading;
 
-use super::parse::{Laser, LineParser, Record};
+use super::parse::{Laser, LineParser, Record, RecordError};
 
 /// A problem reading a log, with file and line.
 #[derive(Debug, thiserror::Error)]
@@ -23,14 +23,14 @@ pub enum LogError {
         source: io::Error,
     },
     /// A record is malformed.
-    #[error("{path}:{line}: {message}")]
+    #[error("{path}:{line}: {source}")]
     Bad {
         /// The file.
         path: PathBuf,
         /// 1-based line.
         line: usize,
         /// What was expected.
-        message: String,
+        source: RecordError,
     },
     /// The bytes could not be read (a truncated or corrupt gzip stream, a
     /// line that is not UTF-8, an I/O error).
@@ -122,8 +122,8 @@ impl LogReader {
                 Ok(Some(Record::Other(kind))) => *self.other.entry(kind).or_default() += 1,
                 Ok(Some(record)) => return Some(Ok(record)),
                 Err(_) if self.options.skip_bad => self.skipped += 1,
-                Err(message) => {
-                    return Some(Err(LogError::Bad { path: self.path.clone(), line: self.line, message }));
+                Err(source) => {
+                    return Some(Err(LogError::Bad { path: self.path.clone(), line: self.line, source }));
                 }
             }
         }

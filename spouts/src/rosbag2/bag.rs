@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use squall_core::geometry::{Pose2, normalize_angle};
 use squall_core::sensor::{LaserReading, Odometry};
 
+use super::cdr::CdrError;
 use super::messages::{self, Transform};
 
 /// Scans farther than this (s) from the odometry stream's first or last
@@ -61,8 +62,25 @@ pub enum BagError {
         /// What the MCAP reader said.
         message: String,
     },
+    /// A message on a topic read carries another type or encoding than
+    /// the topic's.
+    #[error("{path}: message {index} on {topic}: carries {schema} ({encoding}), expected {expected} (cdr)")]
+    WrongType {
+        /// The file.
+        path: PathBuf,
+        /// 0-based index of the message in the file.
+        index: usize,
+        /// Its topic.
+        topic: String,
+        /// The type it carries (its schema's name; empty without one).
+        schema: String,
+        /// Its message encoding.
+        encoding: String,
+        /// The type the topic is read as.
+        expected: &'static str,
+    },
     /// A message could not be decoded.
-    #[error("{path}: message {index} on {topic}: {message}")]
+    #[error("{path}: message {index} on {topic}: {source}")]
     Message {
         /// The file.
         path: PathBuf,
@@ -71,7 +89,7 @@ pub enum BagError {
         /// Its topic.
         topic: String,
         /// What was expected.
-        message: String,
+        source: CdrError,
     },
 }
 
@@ -136,18 +154,16 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
             } else {
                 continue;
             };
-            let bad = |message: String| BagError::Message {
-                path: file.clone(),
-                index,
-                topic: topic.to_string(),
-                message,
-            };
             let schema = message.channel.schema.as_ref().map_or("", |s| s.name.as_str());
             if schema != expected || message.channel.message_encoding != "cdr" {
-                return Err(bad(format!(
-                    "carries {schema} ({}), expected {expected} (cdr)",
-                    message.channel.message_encoding
-                )));
+                return Err(BagError::WrongType {
+                    path: file.clone(),
+                    index,
+                    topic: topic.to_string(),
+                    schema: schema.to_string(),
+                    encoding: message.channel.message_encoding.clone(),
+                    expected,
+                });
             }
             let decoded = match expected {
                 SCAN_TYPE => messages::laser_scan(&message.data).map(|m| raw_scans.push(m)),
@@ -157,7 +173,14 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
             match decoded {
                 Ok(()) => {}
                 Err(_) if topics.skip_bad => skipped += 1,
-                Err(e) => return Err(bad(e)),
+                Err(source) => {
+                    return Err(BagError::Message {
+                        path: file.clone(),
+                        index,
+                        topic: topic.to_string(),
+                        source,
+                    });
+                }
             }
         }
     }

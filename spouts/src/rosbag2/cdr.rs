@@ -11,82 +11,140 @@ pub(crate) struct Cdr<'a> {
     pos: usize,
 }
 
+/// Why a CDR message does not decode. `what` names the field being read.
+/// A [`BagError`](super::BagError) adds the bag, message and topic.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CdrError {
+    /// Fewer bytes than the 4-byte encapsulation header.
+    #[error("{len} bytes is too short for a CDR header")]
+    TooShort {
+        /// Bytes in the message.
+        len: usize,
+    },
+    /// Big-endian CDR, which this reader does not decode.
+    #[error("big-endian CDR is not supported")]
+    BigEndian,
+    /// An encapsulation header of another kind than CDR.
+    #[error("unknown CDR encapsulation 0x{:02x}{:02x}", .header[0], .header[1])]
+    Encapsulation {
+        /// Its first two bytes.
+        header: [u8; 2],
+    },
+    /// A field whose end lies past the largest address.
+    #[error("{what}: size overflow")]
+    SizeOverflow {
+        /// The field.
+        what: &'static str,
+    },
+    /// A field that runs past the end of the message.
+    #[error("{what}: needs {needed} bytes at offset {offset}, the message has {len} (truncated?)")]
+    Truncated {
+        /// The field.
+        what: &'static str,
+        /// Bytes it needs.
+        needed: usize,
+        /// Where it starts (after alignment), from the end of the header.
+        offset: usize,
+        /// Bytes in the message after the header.
+        len: usize,
+    },
+    /// A string that is not UTF-8.
+    #[error("{what}: not UTF-8")]
+    NotUtf8 {
+        /// The field.
+        what: &'static str,
+    },
+    /// A sequence longer than the bytes left could hold.
+    #[error("{what}: {count} elements do not fit in the {left} bytes left (corrupt length?)")]
+    CorruptLength {
+        /// The field.
+        what: &'static str,
+        /// Elements announced.
+        count: usize,
+        /// Bytes left in the message.
+        left: usize,
+    },
+}
+
 /// What went wrong decoding.
-pub(crate) type CdrResult<T> = Result<T, String>;
+pub(crate) type CdrResult<T> = Result<T, CdrError>;
 
 impl<'a> Cdr<'a> {
     /// Checks the encapsulation header (CDR little endian, with or without
     /// the XCDR1 "plain" options).
     pub(crate) fn new(bytes: &'a [u8]) -> CdrResult<Self> {
-        if bytes.len() < 4 {
-            return Err(format!("{} bytes is too short for a CDR header", bytes.len()));
-        }
-        match bytes[1] {
-            0x01 => Ok(Cdr { data: &bytes[4..], pos: 0 }),
-            0x00 => Err("big-endian CDR is not supported".to_string()),
-            other => Err(format!("unknown CDR encapsulation 0x{:02x}{other:02x}", bytes[0])),
+        match bytes {
+            [_, 0x01, _, _, ..] => Ok(Cdr { data: &bytes[4..], pos: 0 }),
+            [_, 0x00, _, _, ..] => Err(CdrError::BigEndian),
+            [first, second, _, _, ..] => Err(CdrError::Encapsulation { header: [*first, *second] }),
+            _ => Err(CdrError::TooShort { len: bytes.len() }),
         }
     }
 
-    fn take(&mut self, n: usize, align: usize, what: &str) -> CdrResult<&'a [u8]> {
+    fn take(&mut self, n: usize, align: usize, what: &'static str) -> CdrResult<&'a [u8]> {
         let start = self.pos.div_ceil(align) * align;
-        let end = start.checked_add(n).ok_or_else(|| format!("{what}: size overflow"))?;
+        let end = start.checked_add(n).ok_or(CdrError::SizeOverflow { what })?;
         if end > self.data.len() {
-            return Err(format!(
-                "{what}: needs {n} bytes at offset {start}, the message has {} (truncated?)",
-                self.data.len()
-            ));
+            return Err(CdrError::Truncated { what, needed: n, offset: start, len: self.data.len() });
         }
         self.pos = end;
         Ok(&self.data[start..end])
     }
 
-    pub(crate) fn u32(&mut self, what: &str) -> CdrResult<u32> {
-        Ok(u32::from_le_bytes(self.take(4, 4, what)?.try_into().expect("4 bytes")))
+    /// The next `N` bytes, aligned to `N`: a primitive's.
+    fn array<const N: usize>(&mut self, what: &'static str) -> CdrResult<[u8; N]> {
+        let mut out = [0; N];
+        // `take` returns exactly the N bytes asked for, or an error.
+        out.copy_from_slice(self.take(N, N, what)?);
+        Ok(out)
     }
 
-    pub(crate) fn i32(&mut self, what: &str) -> CdrResult<i32> {
-        Ok(i32::from_le_bytes(self.take(4, 4, what)?.try_into().expect("4 bytes")))
+    pub(crate) fn u32(&mut self, what: &'static str) -> CdrResult<u32> {
+        self.array(what).map(u32::from_le_bytes)
     }
 
-    pub(crate) fn f32(&mut self, what: &str) -> CdrResult<f32> {
-        Ok(f32::from_le_bytes(self.take(4, 4, what)?.try_into().expect("4 bytes")))
+    pub(crate) fn i32(&mut self, what: &'static str) -> CdrResult<i32> {
+        self.array(what).map(i32::from_le_bytes)
     }
 
-    pub(crate) fn f64(&mut self, what: &str) -> CdrResult<f64> {
-        Ok(f64::from_le_bytes(self.take(8, 8, what)?.try_into().expect("8 bytes")))
+    pub(crate) fn f32(&mut self, what: &'static str) -> CdrResult<f32> {
+        self.array(what).map(f32::from_le_bytes)
+    }
+
+    pub(crate) fn f64(&mut self, what: &'static str) -> CdrResult<f64> {
+        self.array(what).map(f64::from_le_bytes)
     }
 
     /// A string: u32 length including the terminating NUL, then the bytes.
-    pub(crate) fn string(&mut self, what: &str) -> CdrResult<String> {
+    pub(crate) fn string(&mut self, what: &'static str) -> CdrResult<String> {
         let len = self.u32(what)? as usize;
         let bytes = self.take(len, 1, what)?;
         let text = bytes.strip_suffix(&[0]).unwrap_or(bytes);
-        String::from_utf8(text.to_vec()).map_err(|_| format!("{what}: not UTF-8"))
+        String::from_utf8(text.to_vec()).map_err(|_| CdrError::NotUtf8 { what })
     }
 
     /// A sequence length, checked against the bytes left for `elem` bytes
     /// per element (so a corrupt length cannot allocate gigabytes).
-    pub(crate) fn seq_len(&mut self, elem: usize, what: &str) -> CdrResult<usize> {
+    pub(crate) fn seq_len(&mut self, elem: usize, what: &'static str) -> CdrResult<usize> {
         let n = self.u32(what)? as usize;
         let left = self.data.len().saturating_sub(self.pos);
         if n.saturating_mul(elem) > left {
-            return Err(format!(
-                "{what}: {n} elements do not fit in the {left} bytes left (corrupt length?)"
-            ));
+            return Err(CdrError::CorruptLength { what, count: n, left });
         }
         Ok(n)
     }
 
-    pub(crate) fn f32_seq(&mut self, what: &str) -> CdrResult<Vec<f32>> {
+    pub(crate) fn f32_seq(&mut self, what: &'static str) -> CdrResult<Vec<f32>> {
         let n = self.seq_len(4, what)?;
+        // seq_len checked that n × 4 bytes are left: no overflow.
         let bytes = self.take(n * 4, 4, what)?;
-        Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect())
+        Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
     }
 
     /// Skips `n` f64 values (fixed-size arrays such as covariances).
-    pub(crate) fn skip_f64s(&mut self, n: usize, what: &str) -> CdrResult<()> {
-        self.take(n * 8, 8, what).map(|_| ())
+    pub(crate) fn skip_f64s(&mut self, n: usize, what: &'static str) -> CdrResult<()> {
+        self.take(n.saturating_mul(8), 8, what).map(|_| ())
     }
 }
 
@@ -190,15 +248,16 @@ mod tests {
         assert_eq!(c.u32("a").unwrap(), 7);
         assert_eq!(c.string("s").unwrap(), "ab");
         assert_eq!(c.f64("x").unwrap(), 1.5);
-        assert!(c.u32("past the end").unwrap_err().contains("truncated"));
+        assert!(c.u32("past the end").unwrap_err().to_string().contains("truncated"));
     }
 
     #[test]
     fn corrupt_lengths_are_errors() {
         let mut b = vec![0, 1, 0, 0];
         b.extend(u32::MAX.to_le_bytes());
-        assert!(Cdr::new(&b).unwrap().f32_seq("ranges").unwrap_err().contains("corrupt length"));
-        assert!(Cdr::new(&[0, 0, 0, 0]).unwrap_err().contains("big-endian"));
-        assert!(Cdr::new(&[0, 1]).is_err());
+        assert!(Cdr::new(&b).unwrap().f32_seq("ranges").unwrap_err().to_string().contains("corrupt length"));
+        assert_eq!(Cdr::new(&[0, 0, 0, 0]).unwrap_err().to_string(), "big-endian CDR is not supported");
+        assert_eq!(Cdr::new(&[0, 1]).unwrap_err().to_string(), "2 bytes is too short for a CDR header");
+        assert_eq!(Cdr::new(&[0, 7, 0, 0]).unwrap_err().to_string(), "unknown CDR encapsulation 0x0007");
     }
 }

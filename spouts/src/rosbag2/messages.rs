@@ -30,7 +30,7 @@ pub fn yaw(x: f64, y: f64, z: f64, w: f64) -> f64 {
 }
 
 /// A planar pose from a 3-D position and orientation: x, y and yaw.
-fn pose(c: &mut Cdr<'_>, what: &str) -> CdrResult<Pose2> {
+fn pose(c: &mut Cdr<'_>, what: &'static str) -> CdrResult<Pose2> {
     let x = c.f64(what)?;
     let y = c.f64(what)?;
     let _z = c.f64(what)?;

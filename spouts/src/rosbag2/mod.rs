@@ -17,6 +17,7 @@ use squall_core::sensor::{LaserReading, Odometry};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag};
+pub use cdr::CdrError;
 
 use crate::carmen::Pace;
 
@@ -135,6 +136,8 @@ impl Spout for Rosbag2Spout {
             let due = start + Duration::from_secs_f64(((stamp - first) / factor).max(0.0));
             tokio::time::sleep_until(due.into()).await;
         }
+        // The match above set `scan_first` only with a scan queued, and
+        // cleared it only with odometry queued: neither pop can fail.
         if scan_first {
             let scan = self.scans.pop_front().expect("checked above");
             out.emit("scan", scan).await?;

@@ -11,18 +11,24 @@ mod spout;
 pub use robot::{SimConfig, SimEvent, Simulation};
 pub use spout::SimSpout;
 
+use crate::{Error, Result};
+
 /// Roadmap spacing for line-map worlds, metres.
 pub const ROADMAP_SPACING: f64 = 0.5;
 /// Clearance the robot keeps from walls in line-map worlds, metres.
 pub const ROADMAP_MARGIN: f64 = 0.35;
 
+/// The world of the simulating spouts (`sim`, `depth_sim`) when their
+/// params name none: the generated office.
+pub const DEFAULT_WORLD: &str = "office";
+
 /// The floor for a world name: `office` (generated from `seed`) or the path
 /// of a line-map file (with a roadmap through it).
-pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor, String> {
+pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor> {
     if world == "office" {
         return Ok(office::office(seed, 3, 2));
     }
-    let walls =
-        squall_core::linemap::LineMap::load(std::path::Path::new(world)).map_err(|e| e.to_string())?;
-    roadmap::roadmap(walls, ROADMAP_SPACING, ROADMAP_MARGIN).map_err(|e| format!("{world}: {e}"))
+    let walls = squall_core::linemap::LineMap::load(std::path::Path::new(world))?;
+    roadmap::roadmap(walls, ROADMAP_SPACING, ROADMAP_MARGIN)
+        .map_err(|source| Error::Roadmap { world: world.to_string(), source })
 }

@@ -8,6 +8,8 @@ use squall_core::geometry::Real;
 use squall_core::linemap::{LineMap, Segment};
 use squall_core::random::stream_for_purpose;
 
+use crate::{Error, Result};
+
 /// Corridor width, metres.
 pub const CORRIDOR_WIDTH: Real = 2.0;
 const DOOR_WIDTH: Real = 1.0;
@@ -37,6 +39,19 @@ pub struct Floor {
 }
 
 impl Floor {
+    /// Checks that the floor has a node and that its edges join nodes it
+    /// has: what the simulator and the people walking it index by.
+    pub fn check(&self) -> Result<()> {
+        if self.nodes.is_empty() {
+            return Err(Error::EmptyFloor);
+        }
+        let nodes = self.nodes.len();
+        match self.edges.iter().find(|&&(a, b)| a >= nodes || b >= nodes) {
+            Some(&(a, b)) => Err(Error::EdgeOutOfRange { a, b, nodes }),
+            None => Ok(()),
+        }
+    }
+
     /// Indices of the nodes joined to `node`.
     pub fn neighbours(&self, node: usize) -> impl Iterator<Item = usize> + '_ {
         self.edges.iter().filter_map(move |&(a, b)| {
@@ -79,14 +94,16 @@ pub fn office(seed: u64, columns: usize, rows: usize) -> Floor {
     let widths: Vec<Real> = (0..columns).map(|_| rng.random_range(7.0..11.0)).collect();
     let heights: Vec<Real> = (0..rows).map(|_| rng.random_range(6.0..9.0)).collect();
     // Left/bottom edge of corridor k.
-    let mut xs = vec![0.0];
-    for w in &widths {
-        xs.push(xs.last().unwrap() + cw + w);
-    }
-    let mut ys = vec![0.0];
-    for h in &heights {
-        ys.push(ys.last().unwrap() + cw + h);
-    }
+    let edges_from = |sizes: &[Real]| {
+        let mut edges = vec![0.0];
+        let mut last = 0.0;
+        for size in sizes {
+            last = last + cw + size;
+            edges.push(last);
+        }
+        edges
+    };
+    let (xs, ys) = (edges_from(&widths), edges_from(&heights));
     let (x_end, y_end) = (xs[columns] + cw, ys[rows] + cw);
     let mut walls = Vec::new();
     rect(&mut walls, 0.0, 0.0, x_end, y_end);

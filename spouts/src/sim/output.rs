@@ -14,6 +14,7 @@ use squall_core::trajectory::Trajectory;
 use squall_topology::fsio::write_atomic;
 
 use super::robot::{SimEvent, Simulation};
+use crate::{Error, Result};
 use squall_core::linemap::LineMap;
 
 /// Local relations join scans this far apart along the true path, metres.
@@ -35,7 +36,7 @@ pub struct SimSummary {
 }
 
 /// Runs `sim` to the end and writes its files into `dir`.
-pub fn write_run(sim: Simulation, dir: &Path) -> std::io::Result<SimSummary> {
+pub fn write_run(sim: Simulation, dir: &Path) -> Result<SimSummary> {
     let world = sim.floor().world.clone();
     let mut clf = String::new();
     let mut truth = Trajectory::default();
@@ -77,16 +78,17 @@ pub fn write_run(sim: Simulation, dir: &Path) -> std::io::Result<SimSummary> {
             }
         }
     }
-    write_atomic(&dir.join("sim.clf"), clf.as_bytes())?;
-    write_tum(&truth, &dir.join("ground_truth.tum"))?;
+    write_file(&dir.join("sim.clf"), clf.as_bytes())?;
+    write_file(&dir.join("ground_truth.tum"), truth.to_tum().as_bytes())?;
     let (relations, local, loops) = relations(&truth);
-    write_atomic(&dir.join("sim.relations"), relations.as_bytes())?;
+    write_file(&dir.join("sim.relations"), relations.as_bytes())?;
     write_png(&rasterize(&world, 0.05), &truth.poses, &dir.join("world.png"))?;
     Ok(SimSummary { scans: truth.len(), local_relations: local, loop_relations: loops })
 }
 
-fn write_tum(t: &Trajectory, path: &Path) -> std::io::Result<()> {
-    write_atomic(path, t.to_tum().as_bytes())
+/// Writes `bytes` to `path` atomically; an error names the file.
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, bytes).map_err(|source| Error::Write { path: path.to_path_buf(), source })
 }
 
 fn relation_line(out: &mut String, t: &Trajectory, i: usize, j: usize) {

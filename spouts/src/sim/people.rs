@@ -9,6 +9,7 @@ use squall_core::depth_render::Person;
 use squall_core::geometry::Real;
 
 use super::office::Floor;
+use crate::{Error, Result};
 use squall_core::random::stream_for_purpose;
 
 /// Slowest and fastest walking pace, m/s.
@@ -34,27 +35,34 @@ pub struct Crowd {
 
 impl Crowd {
     /// `count` people at random nodes of `floor`, seeded by `seed`. A
-    /// floor without edges has nowhere to walk; its people stand still.
-    pub fn new(floor: &Floor, count: usize, seed: u64) -> Self {
+    /// floor without edges has nowhere to walk; its people stand still. An
+    /// error if the floor is malformed ([`Floor::check`]).
+    pub fn new(floor: &Floor, count: usize, seed: u64) -> Result<Self> {
+        floor.check()?;
         let mut rng = stream_for_purpose(seed, "people");
-        let walkers = (0..count)
-            .map(|_| {
-                let from = rng.random_range(0..floor.nodes.len());
-                let to = floor.neighbours(from).next().unwrap_or(from);
-                Walker {
-                    from,
-                    to,
-                    along: 0.0,
-                    pace: rng.random_range(PACE.0..PACE.1),
-                    radius: rng.random_range(0.2..0.3),
-                    height: rng.random_range(1.5..1.9),
-                }
-            })
-            .collect();
-        Crowd { walkers, rng }
+        let mut walkers = Vec::new();
+        walkers.try_reserve_exact(count).map_err(|_| Error::TooMany { count, what: "people" })?;
+        walkers.extend((0..count).map(|_| {
+            let from = rng.random_range(0..floor.nodes.len());
+            let to = floor.neighbours(from).next().unwrap_or(from);
+            Walker {
+                from,
+                to,
+                along: 0.0,
+                pace: rng.random_range(PACE.0..PACE.1),
+                radius: rng.random_range(0.2..0.3),
+                height: rng.random_range(1.5..1.9),
+            }
+        }));
+        Ok(Crowd { walkers, rng })
     }
 
     /// Moves everyone on by `dt` seconds.
+    ///
+    /// # Panics
+    ///
+    /// If `floor` is not the floor they were placed on and lacks their
+    /// nodes: walking is per frame, and the floor never changes under them.
     pub fn advance(&mut self, floor: &Floor, dt: Real) {
         for w in &mut self.walkers {
             let mut left = w.pace * dt.max(0.0);
@@ -77,6 +85,10 @@ impl Crowd {
     }
 
     /// Where everyone is now.
+    ///
+    /// # Panics
+    ///
+    /// As [`advance`](Self::advance), on another floor than theirs.
     pub fn people(&self, floor: &Floor) -> Vec<Person> {
         self.walkers
             .iter()
@@ -106,7 +118,7 @@ mod tests {
     #[test]
     fn people_walk_the_roadmap_at_their_pace() {
         let floor = office(3, 3, 2);
-        let mut crowd = Crowd::new(&floor, 6, 11);
+        let mut crowd = Crowd::new(&floor, 6, 11).unwrap();
         let mut before = crowd.people(&floor);
         let mut moved = 0.0;
         for _ in 0..600 {
@@ -134,7 +146,7 @@ mod tests {
     fn the_same_seed_walks_the_same_way() {
         let floor = office(3, 3, 2);
         let walk = |seed| {
-            let mut crowd = Crowd::new(&floor, 3, seed);
+            let mut crowd = Crowd::new(&floor, 3, seed).unwrap();
             (0..200)
                 .map(|_| {
                     crowd.advance(&floor, 0.1);
@@ -145,5 +157,17 @@ mod tests {
         };
         assert_eq!(walk(5), walk(5));
         assert_ne!(walk(5), walk(6));
+    }
+
+    #[test]
+    fn a_floor_without_nodes_is_an_error() {
+        let floor = Floor { nodes: Vec::new(), edges: Vec::new(), ..office(3, 1, 1) };
+        assert_eq!(Crowd::new(&floor, 2, 1).unwrap_err().to_string(), "the floor has no nodes");
+        // Nowhere to walk: they stand still.
+        let still = Floor { edges: Vec::new(), ..office(3, 1, 1) };
+        let mut crowd = Crowd::new(&still, 2, 1).unwrap();
+        let before = crowd.people(&still);
+        crowd.advance(&still, 1.0);
+        assert_eq!(crowd.people(&still), before);
     }
 }

@@ -31,12 +31,44 @@ fn enclosed(world: &LineMap, p: (Real, Real), reach: Real) -> bool {
     hits >= 13
 }
 
+/// Why a map has no roadmap.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RoadmapError {
+    /// No two points of the grid lie inside the walls and clear of them.
+    #[error("no free space inside the walls: no two points {spacing} m apart with {margin} m clearance")]
+    NoFreeSpace {
+        /// The grid's spacing, metres.
+        spacing: Real,
+        /// The clearance asked for, metres.
+        margin: Real,
+    },
+    /// The grid's spacing is not a positive number of metres.
+    #[error("the roadmap's spacing must be a positive number of metres, got {0}")]
+    Spacing(Real),
+    /// The map is so large for the spacing that the grid's points cannot be
+    /// counted.
+    #[error("the map is too large for a roadmap with points every {0} m")]
+    TooLarge(Real),
+}
+
 /// Builds a roadmap with points every `spacing` metres at least `margin`
 /// metres from any wall. Errors when no free, enclosed space is found.
-pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, String> {
+pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, RoadmapError> {
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(RoadmapError::Spacing(spacing));
+    }
     let (x0, y0, x1, y1) = world.bounds();
     let reach = (x1 - x0).hypot(y1 - y0);
-    let (nx, ny) = (((x1 - x0) / spacing) as usize + 1, ((y1 - y0) / spacing) as usize + 1);
+    // Points per row and rows (the casts saturate; a map without walls has
+    // inverted bounds and gets one point, which nothing encloses).
+    let points = |extent: Real| (extent / spacing) as usize;
+    // The grid's ids must be countable and fit in a Vec.
+    let fits = |n: usize| n <= isize::MAX as usize / std::mem::size_of::<usize>();
+    let (nx, ny) = match (points(x1 - x0).checked_add(1), points(y1 - y0).checked_add(1)) {
+        (Some(nx), Some(ny)) if nx.checked_mul(ny).is_some_and(fits) => (nx, ny),
+        _ => return Err(RoadmapError::TooLarge(spacing)),
+    };
     let mut id = vec![usize::MAX; nx * ny];
     let mut nodes = Vec::new();
     for j in 0..ny {
@@ -96,9 +128,7 @@ pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, Str
         }
     }
     if best.1 < 2 {
-        return Err(format!(
-            "no free space inside the walls: no two points {spacing} m apart with {margin} m clearance"
-        ));
+        return Err(RoadmapError::NoFreeSpace { spacing, margin });
     }
     let mut new_id = vec![usize::MAX; nodes.len()];
     let mut kept = Vec::new();
@@ -133,5 +163,20 @@ mod tests {
         for &(a, b) in &floor.edges {
             assert!(floor.world.clear(floor.nodes[a], floor.nodes[b]));
         }
+    }
+
+    #[test]
+    fn spacings_that_give_no_grid_are_errors() {
+        let room = || LineMap::parse("room", "0,0,6,0\n6,0,6,4\n6,4,0,4\n0,4,0,0\n").unwrap();
+        for spacing in [0.0, -1.0, Real::NAN, Real::INFINITY] {
+            assert!(matches!(roadmap(room(), spacing, 0.4), Err(RoadmapError::Spacing(_))), "{spacing}");
+        }
+        assert_eq!(roadmap(room(), 1e-300, 0.4).unwrap_err(), RoadmapError::TooLarge(1e-300));
+        assert_eq!(
+            roadmap(room(), 0.5, 3.0).unwrap_err().to_string(),
+            "no free space inside the walls: no two points 0.5 m apart with 3 m clearance"
+        );
+        let nothing = roadmap(LineMap::default(), 0.5, 0.4).unwrap_err();
+        assert!(matches!(nothing, RoadmapError::NoFreeSpace { .. }), "{nothing}");
     }
 }

@@ -12,6 +12,7 @@ use squall_core::geometry::{Pose2, Real, normalize_angle};
 use squall_core::sensor::{LaserReading, Odometry};
 
 use super::office::{Floor, Route};
+use crate::{Error, Result};
 use squall_core::random::{standard_normal, stream_for_purpose};
 
 /// What the simulator can be asked for. The defaults are those of
@@ -59,23 +60,25 @@ impl Default for SimConfig {
 
 impl SimConfig {
     /// Checks every setting's range; says which is wrong.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<()> {
         let positive = |v: Real| v.is_finite() && v > 0.0;
         if !positive(self.duration_secs) {
-            return Err(format!("duration must be > 0 s, got {}", self.duration_secs));
+            return Err(Error::Duration(self.duration_secs));
         }
         if self.beams < 2 {
-            return Err(format!("beams must be at least 2, got {}", self.beams));
+            return Err(Error::Beams(self.beams));
         }
         if !(positive(self.fov) && self.fov <= 2.0 * PI) {
-            return Err(format!("field of view must be in (0°, 360°], got {}°", self.fov.to_degrees()));
+            return Err(Error::FieldOfView(self.fov));
         }
         let noise_ok = self.range_noise.is_finite() && self.range_noise >= 0.0;
         if !positive(self.range_max) || !noise_ok || !(0.0..=1.0).contains(&self.dropout) {
-            return Err("range_max must be > 0, range_noise ≥ 0 and dropout in [0, 1]".to_string());
+            let (range_max, range_noise, dropout) = (self.range_max, self.range_noise, self.dropout);
+            return Err(Error::Laser { range_max, range_noise, dropout });
         }
         if !positive(self.scan_hz) || !positive(self.max_speed) || !positive(self.max_turn) {
-            return Err("scan rate, speed and turn rate must be > 0".to_string());
+            let (scan_hz, max_speed, max_turn) = (self.scan_hz, self.max_speed, self.max_turn);
+            return Err(Error::Motion { scan_hz, max_speed, max_turn });
         }
         Ok(())
     }
@@ -120,19 +123,23 @@ pub struct Simulation {
 
 impl Simulation {
     /// Starts the robot at the floor's first node, facing its first
-    /// neighbour.
-    pub fn new(floor: Floor, config: SimConfig) -> Self {
+    /// neighbour. An error if a setting is out of range
+    /// ([`SimConfig::check`]), the floor is malformed ([`Floor::check`]) or
+    /// no edge leaves its first node.
+    pub fn new(floor: Floor, config: SimConfig) -> Result<Self> {
+        config.check()?;
+        floor.check()?;
+        let first = floor.neighbours(0).next().ok_or(Error::Stranded)?;
         let mut bias_rng = stream_for_purpose(config.seed, "odometry bias");
         let sign = |rng: &mut ChaCha8Rng| if rng.random_bool(0.5) { 1.0 } else { -1.0 };
         let scale_bias = sign(&mut bias_rng) * bias_rng.random_range(0.01..0.02);
         let heading_bias = sign(&mut bias_rng) * bias_rng.random_range(0.15..0.35_f64).to_radians();
         let start = floor.nodes[0];
-        let first = floor.neighbours(0).next().expect("the floor's graph is connected");
         let heading = (floor.nodes[first].1 - start.1).atan2(floor.nodes[first].0 - start.0);
         let truth = Pose2::new(start.0, start.1, heading);
         let steps_per_scan = (PHYSICS_HZ / config.scan_hz).round().max(1.0) as u64;
         let floor_nodes = floor.nodes.len();
-        Simulation {
+        Ok(Simulation {
             steps: (config.duration_secs * PHYSICS_HZ) as u64,
             route_rng: stream_for_purpose(config.seed, "route"),
             odom_rng: stream_for_purpose(config.seed, "odometry noise"),
@@ -151,7 +158,7 @@ impl Simulation {
             scale_bias,
             heading_bias,
             pending: None,
-        }
+        })
     }
 
     /// The floor being simulated.
@@ -205,11 +212,13 @@ impl Simulation {
     fn explore_next(&mut self) {
         let here = self.target;
         if self.plan.is_empty() {
+            // `new` checked that the floor has nodes, so the range is not
+            // empty, and the minimum of 12 candidates exists.
             let n = self.floor.nodes.len();
             let goal = (0..12)
                 .map(|_| self.route_rng.random_range(0..n))
                 .min_by_key(|&g| (self.node_visits[g], usize::MAX - g))
-                .expect("12 candidates");
+                .unwrap_or(here);
             self.plan = self.shortest_path(here, goal);
         }
         // String pulling: skip plan nodes while the straight line stays clear.
@@ -330,5 +339,52 @@ impl Iterator for Simulation {
             }
         }
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::office::office;
+    use super::*;
+
+    #[test]
+    fn a_bad_setting_says_which() {
+        let c = SimConfig::default();
+        let e = |c: SimConfig| c.check().unwrap_err().to_string();
+        assert_eq!(e(SimConfig { duration_secs: 0.0, ..c.clone() }), "duration must be > 0 s, got 0");
+        assert_eq!(e(SimConfig { beams: 1, ..c.clone() }), "beams must be at least 2, got 1");
+        assert_eq!(e(SimConfig { fov: 0.0, ..c.clone() }), "field of view must be in (0°, 360°], got 0°");
+        assert_eq!(
+            e(SimConfig { dropout: 1.5, ..c.clone() }),
+            "range_max must be > 0, range_noise ≥ 0 and dropout in [0, 1]"
+        );
+        assert_eq!(
+            e(SimConfig { max_turn: -1.0, ..c.clone() }),
+            "scan rate, speed and turn rate must be > 0"
+        );
+        assert!(c.check().is_ok());
+    }
+
+    #[test]
+    fn a_bad_config_or_floor_is_an_error_not_a_panic() {
+        let config = SimConfig { duration_secs: 1.0, ..SimConfig::default() };
+        let e = |floor: Floor, config: SimConfig| Simulation::new(floor, config).unwrap_err().to_string();
+        // Zero beams would underflow the beam spacing; a dropout above 1 is
+        // no probability.
+        assert!(e(office(1, 1, 1), SimConfig { beams: 0, ..config.clone() }).starts_with("beams must"));
+        assert!(e(office(1, 1, 1), SimConfig { dropout: 2.0, ..config.clone() }).contains("dropout"));
+        let floor = office(1, 1, 1);
+        assert_eq!(e(Floor { nodes: Vec::new(), ..floor.clone() }, config.clone()), "the floor has no nodes");
+        assert_eq!(
+            e(Floor { edges: vec![(0, 1), (1, 9)], ..floor.clone() }, config.clone()),
+            "the floor's edge 1–9 names a node it does not have (it has 4)"
+        );
+        assert_eq!(
+            e(Floor { edges: vec![(1, 2)], ..floor.clone() }, config.clone()),
+            "the floor's first node has no edge: the robot has nowhere to drive"
+        );
+        // No columns and no rows: one node, nowhere to drive.
+        assert!(e(office(1, 0, 0), config.clone()).contains("nowhere to drive"));
+        assert!(Simulation::new(floor, config).unwrap().count() > 0);
     }
 }

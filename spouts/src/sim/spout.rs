@@ -6,47 +6,43 @@ use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
+use super::DEFAULT_WORLD;
 use super::robot::{SimConfig, SimEvent, Simulation};
 
+/// The `sim` spout's params; a param left out takes its value from
+/// [`P::default`].
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 struct P {
     /// `"office"` (generated from the seed) or a line-map file. The default
-    /// is `"office"`.
-    #[serde(default = "default_world")]
+    /// is [`DEFAULT_WORLD`], `"office"`.
     world: String,
     /// Simulated seconds. The default is 600.
-    #[serde(default = "default_duration")]
     duration_secs: f64,
     /// Beams over the field of view. The default is 180.
-    #[serde(default = "default_beams")]
     beams: usize,
     /// Field of view, degrees. The default is 180.
-    #[serde(default = "default_fov")]
     fov_deg: f64,
     /// Laser range, metres. The default is 30.
-    #[serde(default = "default_range")]
     range_max: f64,
-    /// Seed; the default is the topology's seed.
+    /// Seed; the default (`None`) is the topology's seed.
     seed: Option<u64>,
-    /// Stop after this many scans.
+    /// Stop after this many scans; the default (`None`) is no limit.
     max_scans: Option<u64>,
 }
 
-fn default_world() -> String {
-    "office".into()
-}
-fn default_duration() -> f64 {
-    600.0
-}
-fn default_beams() -> usize {
-    180
-}
-fn default_fov() -> f64 {
-    180.0
-}
-fn default_range() -> f64 {
-    30.0
+impl Default for P {
+    fn default() -> Self {
+        P {
+            world: DEFAULT_WORLD.into(),
+            duration_secs: 600.0,
+            beams: 180,
+            fov_deg: 180.0,
+            range_max: 30.0,
+            seed: None,
+            max_scans: None,
+        }
+    }
 }
 
 /// Emits a simulated run.
@@ -84,7 +80,7 @@ impl Spout for SimSpout {
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
         let floor = super::floor_for(&self.world, self.config.seed)?;
         ctx.expect_emits((self.config.duration_secs * self.config.scan_hz) as u64 * 3);
-        self.sim = Some(Simulation::new(floor, self.config.clone()));
+        self.sim = Some(Simulation::new(floor, self.config.clone())?);
         Ok(())
     }
 
@@ -107,5 +103,22 @@ impl Spout for SimSpout {
                 Ok(SpoutStatus::Continue)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_left_out_take_the_documented_defaults() {
+        let p: P = Params::new(toml::Table::new(), 7, 1).parse().unwrap();
+        assert_eq!((p.world.as_str(), p.duration_secs, p.beams), ("office", 600.0, 180));
+        assert_eq!((p.fov_deg, p.range_max, p.seed, p.max_scans), (180.0, 30.0, None, None));
+        let spout = SimSpout::from_params(&Params::new(toml::Table::new(), 7, 1)).unwrap();
+        assert_eq!(spout.config, SimConfig { seed: 7, fov: 180f64.to_radians(), ..SimConfig::default() });
+        let e =
+            SimSpout::from_params(&Params::new(toml::from_str("fov_deg = 0").unwrap(), 7, 1)).unwrap_err();
+        assert_eq!(e.to_string(), "field of view must be in (0°, 360°], got 0°");
     }
 }
