@@ -121,6 +121,14 @@ pub(crate) enum EventKind {
     HostLost(u16),
 }
 
+/// The task that failed a run, and why; the run's error names it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct TaskFailure {
+    pub(crate) component: usize,
+    pub(crate) task: usize,
+    pub(crate) message: String,
+}
+
 /// A task's report.
 #[derive(Debug)]
 pub(crate) struct Event {

@@ -10,7 +10,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use crate::plan::Topology;
-use crate::runtime::control::{Event, EventKind, Stage};
+use crate::runtime::control::{Event, EventKind, Stage, TaskFailure};
 use crate::runtime::wiring::Wiring;
 use crate::spec::Role;
 
@@ -29,9 +29,9 @@ pub(crate) trait Hosts {
     /// A process of the run was lost: moves its tasks to the others, or
     /// says why the run cannot go on, naming a task it lost (component,
     /// task, why). `running`: the spouts are not done.
-    fn recover(&mut self, host: u16, running: bool) -> Result<(), (usize, usize, String)> {
+    fn recover(&mut self, host: u16, running: bool) -> Result<(), TaskFailure> {
         let _ = running;
-        Err((0, 0, format!("failed: host {host} was lost")))
+        Err(TaskFailure { component: 0, task: 0, message: format!("failed: host {host} was lost") })
     }
 }
 
@@ -111,11 +111,7 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
     }
 
     /// Runs the shutdown protocol; returns the first failure, if any.
-    pub(crate) fn drive(
-        &mut self,
-        events: &mpsc::Receiver<Event>,
-        grace: Duration,
-    ) -> Option<(usize, usize, String)> {
+    pub(crate) fn drive(&mut self, events: &mpsc::Receiver<Event>, grace: Duration) -> Option<TaskFailure> {
         let order = &self.topology.order;
         let mut phase = Phase::Running;
         loop {
@@ -126,7 +122,7 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
                     EventKind::Exited => self.exited += 1,
                     EventKind::Failed(message) => {
                         self.abort(events, grace);
-                        return Some((component, task, message));
+                        return Some(TaskFailure { component, task, message });
                     }
                     EventKind::HostLost(host) => {
                         if let Err(failure) = self.hosts.recover(host, phase == Phase::Running) {

@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use crate::metrics::{RunReport, TaskOutcome, component_report};
 use crate::plan::Topology;
+use crate::runtime::control::TaskFailure;
 use crate::spec::Role;
 
 /// A run that failed: which task and why, with the metrics up to then.
@@ -33,12 +34,12 @@ pub enum RunError {
 pub(crate) fn finish_run(
     topology: &Topology,
     report: RunReport,
-    failure: Option<(usize, usize, String)>,
+    failure: Option<TaskFailure>,
 ) -> Result<RunReport, RunError> {
     match failure {
         None => Ok(report),
-        Some((c, task, message)) => {
-            let spec = &topology.components[c].spec;
+        Some(TaskFailure { component, task, message }) => {
+            let spec = &topology.components[component].spec;
             Err(RunError::TaskFailed {
                 role: spec.role,
                 component: spec.name.clone(),

@@ -13,13 +13,13 @@ use zenoh::Session;
 use zenoh::Wait;
 
 use crate::cluster::config::ClusterSpec;
-use crate::cluster::run::host::HostRun;
+use crate::cluster::run::host::{HostRun, HostTotals};
 use crate::cluster::run::layout::Layout;
 use crate::cluster::session::{self, SessionOptions, control_key, reply_key, send_control, worker_key};
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, EdgeTraffic, Frame, RunPlan, TaskEvent};
 use crate::metrics::{EdgeReport, RunReport, TaskOutcome};
 use crate::plan::Topology;
-use crate::runtime::control::{Event, EventKind, Stage};
+use crate::runtime::control::{Event, EventKind, Stage, TaskFailure};
 
 use crate::runtime::coordinator::{Coordinator, Hosts};
 use crate::runtime::outcome::{build_report, finish_run};
@@ -50,9 +50,6 @@ pub enum ClusterRunError {
 fn setup(message: impl std::fmt::Display) -> ClusterRunError {
     ClusterRunError::Setup(message.to_string())
 }
-
-/// A host's queue totals and its tuples sent to and received from each host.
-type HostTotals = (u64, u64, Vec<u64>, Vec<u64>);
 
 /// What workers send up during a run, besides task events.
 enum Up {
@@ -202,7 +199,7 @@ fn subscribe_to_reports(
                 received_from,
                 ticking,
             })) => {
-                let totals = (!ticking).then_some((accepted, resolved, sent_to, received_from));
+                let totals = (!ticking).then_some(HostTotals { accepted, resolved, sent_to, received_from });
                 let _ = up.send(Up::Totals { nonce, host, totals });
             }
             Ok(Frame::Control(Control::Outcomes { host, tasks, edges, refused })) => {
@@ -450,7 +447,11 @@ impl ClusterHosts<'_> {
 
     /// Adds one host's totals: its queues, and its traffic with the hosts
     /// still in the run (what went to or came from a lost one is gone).
-    fn add(&self, sum: &mut (u64, u64), (accepted, resolved, sent_to, received_from): HostTotals) {
+    fn add(
+        &self,
+        sum: &mut (u64, u64),
+        HostTotals { accepted, resolved, sent_to, received_from }: HostTotals,
+    ) {
         let live = |h: &usize| !self.lost.contains(&(*h as u16));
         let over = |v: &[u64]| v.iter().enumerate().filter(|(h, _)| live(h)).map(|(_, n)| n).sum::<u64>();
         sum.0 += accepted + over(&sent_to);
@@ -495,7 +496,7 @@ impl Hosts for &mut ClusterHosts<'_> {
         self.advance(0, Stage::Abort);
     }
 
-    fn recover(&mut self, host: u16, running: bool) -> Result<(), (usize, usize, String)> {
+    fn recover(&mut self, host: u16, running: bool) -> Result<(), TaskFailure> {
         if self.lost.contains(&host) || !self.workers.contains(&host) {
             return Ok(());
         }
@@ -513,19 +514,16 @@ impl Hosts for &mut ClusterHosts<'_> {
             return Ok(());
         };
         if !running {
-            return Err((
-                first_c,
-                first_t,
-                format!("failed: its worker \"{name}\" was lost while the run was ending"),
-            ));
+            let message = format!("failed: its worker \"{name}\" was lost while the run was ending");
+            return Err(TaskFailure { component: first_c, task: first_t, message });
         }
         if let Some(&(c, t)) =
             tasks.iter().find(|(c, _)| self.topology.components[*c].spec.role == crate::spec::Role::Spout)
         {
             let why = format!("failed: its worker \"{name}\" was lost, and its place in its source with it");
-            return Err((c, t, why));
+            return Err(TaskFailure { component: c, task: t, message: why });
         }
-        let lost_at = |why: String| (first_c, first_t, why);
+        let lost_at = |message: String| TaskFailure { component: first_c, task: first_t, message };
         self.workers.retain(|&h| h != host);
         self.lost.push(host);
         // Survivors take the tasks in turn; with none left, the coordinator.

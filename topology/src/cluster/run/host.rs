@@ -38,6 +38,19 @@ fn elsewhere(link: &Arc<Link>, host: u16) -> impl Fn(&Hop) -> Option<Target> + '
     }
 }
 
+/// A host's counts for the shutdown protocol's quiescence test.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct HostTotals {
+    /// Tuples its queues accepted.
+    pub(crate) accepted: u64,
+    /// Tuples its queues resolved (executed or dropped).
+    pub(crate) resolved: u64,
+    /// Tuples it sent to each host.
+    pub(crate) sent_to: Vec<u64>,
+    /// Tuples it received from each host.
+    pub(crate) received_from: Vec<u64>,
+}
+
 /// This process's tasks of a run and its links.
 pub(crate) struct HostRun {
     pub(crate) host: u16,
@@ -146,13 +159,13 @@ impl HostRun {
 
     /// (accepted, resolved) by this host's queues, the tuples sent to and
     /// received from each host; `None` while a tick runs.
-    pub(crate) fn totals(&self) -> Option<(u64, u64, Vec<u64>, Vec<u64>)> {
+    pub(crate) fn totals(&self) -> Option<HostTotals> {
         if self.wiring.controls.iter().flatten().any(|c| c.ticking.load(Ordering::SeqCst)) {
             return None;
         }
         let (accepted, resolved) = self.wiring.queue_totals();
         let (sent_to, received_from) = self.link.counts();
-        Some((accepted, resolved, sent_to, received_from))
+        Some(HostTotals { accepted, resolved, sent_to, received_from })
     }
 
     /// Moves this host's tasks of `component` to `stage`; an abort also

@@ -10,7 +10,7 @@ use zenoh::Session;
 use zenoh::Wait;
 
 use crate::cluster::HostError;
-use crate::cluster::run::host::HostRun;
+use crate::cluster::run::host::{HostRun, HostTotals};
 use crate::cluster::run::layout::Layout;
 use crate::cluster::session::send_control;
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan, TaskEvent};
@@ -203,7 +203,7 @@ impl Following<'_> {
     fn totals(&self, nonce: u64) -> Control {
         let host = self.plan.host;
         match self.host.totals() {
-            Some((accepted, resolved, sent_to, received_from)) => {
+            Some(HostTotals { accepted, resolved, sent_to, received_from }) => {
                 Control::Totals { nonce, host, accepted, resolved, sent_to, received_from, ticking: false }
             }
             None => Control::Totals {
