@@ -119,17 +119,28 @@ fn scores(args: &EvalArgs) -> Result<Scores, String> {
 }
 
 fn load_trajectory(path: &Path) -> Result<Trajectory, String> {
-    let name = path.to_string_lossy();
-    if name.ends_with(".clf") || name.ends_with(".clf.gz") {
-        let records = read_log(path, ReadOptions::default()).map_err(|e| e.to_string())?;
-        let mut t = Trajectory::default();
-        for r in records {
-            if let Record::Scan(Laser::Front, scan) = r {
-                t.push(scan.stamp, scan.odometry);
-            }
-        }
-        Ok(t)
+    if is_carmen(path) {
+        odometry_at_scans(path)
     } else {
         Trajectory::read_tum(path).map_err(|e| e.to_string())
     }
+}
+
+/// Whether `path` names a CARMEN log (`.clf`, `.clf.gz`).
+pub(super) fn is_carmen(path: &Path) -> bool {
+    let name = path.to_string_lossy();
+    name.ends_with(".clf") || name.ends_with(".clf.gz")
+}
+
+/// A CARMEN log's raw odometry at its front scans: the trajectory a robot
+/// without SLAM would report, the baseline that SLAM must beat.
+pub(super) fn odometry_at_scans(path: &Path) -> Result<Trajectory, String> {
+    let records = read_log(path, ReadOptions::default()).map_err(|e| e.to_string())?;
+    let mut t = Trajectory::default();
+    for r in records {
+        if let Record::Scan(Laser::Front, scan) = r {
+            t.push(scan.stamp, scan.odometry);
+        }
+    }
+    Ok(t)
 }

@@ -9,6 +9,7 @@ mod run;
 mod sim;
 mod slam;
 mod speedup;
+mod study;
 #[cfg(feature = "cluster")]
 mod tls;
 #[cfg(feature = "cluster")]
@@ -39,6 +40,7 @@ const EXIT_FAILED: u8 = 1;
         squall eval --trajectory out/trajectory.tum --relations aces.relations\n  \
         squall sim --world office --duration 600 --seed 1 --out out/sim\n  \
         squall slam --log ../shared/data/laser/aces.clf --out out/aces\n  \
+        squall study --logs ../shared/data/laser/aces.clf --seeds 1-10 --out out/study\n  \
         squall kinds\n\n\
         Exit codes: 0 success, 1 the run failed, 2 invalid topology or arguments."
 )]
@@ -102,6 +104,10 @@ enum Command {
     /// Run SLAM for every (particles, matcher tasks) pair; print the
     /// speedup table, write speedup.csv and speedup.svg.
     Speedup(speedup::SpeedupArgs),
+    /// Run SLAM on every (log, seed) as its own process; print the spread
+    /// of the error against the raw odometry's, with CPU time and memory;
+    /// write study.csv, study.md and study.svg.
+    Study(study::StudyArgs),
     /// Simulate a robot exploring a world; write a CARMEN log, ground truth
     /// and relations.
     Sim(sim::SimArgs),
@@ -154,6 +160,7 @@ pub(crate) fn main() -> ExitCode {
         Command::Sim(args) => sim::sim(&args),
         Command::Slam(args) => slam::slam(&args),
         Command::Speedup(args) => speedup::speedup(&args),
+        Command::Study(args) => study::study(&args),
         Command::Localize(args) => localize::localize(&args),
         #[cfg(feature = "cluster")]
         Command::Worker(args) => worker::worker(&args),
