@@ -410,6 +410,61 @@ fn sim_writes_a_log_that_eval_and_topologies_read() {
 }
 
 #[test]
+fn sim_odometry_quality_and_laser_flags_take_effect() {
+    let dir = out_dir("sim-odometry");
+    // Raw odometry's relation error for each quality, same seed and route.
+    let error = |quality: &str| -> f64 {
+        let out_dir = dir.join(quality);
+        let out = squall(&[
+            "sim",
+            "--duration",
+            "120",
+            "--seed",
+            "4",
+            "--odometry",
+            quality,
+            "--out",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let (clf, rel) = (out_dir.join("sim.clf"), out_dir.join("sim.relations"));
+        let out = squall(&[
+            "eval",
+            "--trajectory",
+            clf.to_str().unwrap(),
+            "--relations",
+            rel.to_str().unwrap(),
+            "--json",
+        ]);
+        let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+        v["trans_mean"].as_f64().unwrap()
+    };
+    let (good, poor, bad) = (error("good"), error("poor"), error("bad"));
+    assert!(good < poor && poor < bad, "odometry errors: good {good}, poor {poor}, bad {bad}");
+    let out = squall(&["sim", "--odometry", "awful", "--out", dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("good, poor or bad"), "{}", text(&out.stderr));
+    // The laser's field of view and range reach the log.
+    let narrow = dir.join("narrow");
+    let out = squall(&[
+        "sim",
+        "--duration",
+        "5",
+        "--fov-deg",
+        "90",
+        "--range-max",
+        "10",
+        "--out",
+        narrow.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let clf = std::fs::read_to_string(narrow.join("sim.clf")).unwrap();
+    assert!(clf.contains("PARAM laser_front_laser_angle_min -0.785398163"), "{clf:.400}");
+    assert!(clf.contains("PARAM robot_front_laser_max 10.00"), "{clf:.400}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn the_sim_spout_feeds_a_topology() {
     let dir = out_dir("simrun");
     let out = squall(&[

@@ -86,6 +86,9 @@ pub enum Error {
     /// The robot starts at the floor's first node, and no edge leaves it.
     #[error("the floor's first node has no edge: the robot has nowhere to drive")]
     Stranded,
+    /// An odometry quality the simulator does not have.
+    #[error("odometry must be good, poor or bad, got {0:?}")]
+    OdometryQuality(String),
     /// `depth_sim` found no place for a box away from the roadmap: the map
     /// is too small for them.
     #[error("no place for box {} of {wanted} at least 1 m from the roadmap after {tries} tries", .placed + 1)]

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use squall_spouts::sim::output::write_run;
-use squall_spouts::sim::{SimConfig, Simulation, floor_for};
+use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for};
 
 use super::{EXIT_FAILED, EXIT_INVALID};
 
@@ -30,6 +30,10 @@ pub(super) struct SimArgs {
     /// Laser range, metres (farther walls give no return).
     #[arg(long, default_value_t = 30.0)]
     range_max: f64,
+    /// Wheel odometry: good (0.2–0.5% scale error, 0.02–0.05°/m heading
+    /// drift), poor (1–2%, 0.15–0.35°/m) or bad (3–5%, 0.5–0.8°/m).
+    #[arg(long, default_value = "poor", value_name = "good|poor|bad")]
+    odometry: OdometryQuality,
     /// Output folder: sim.clf, ground_truth.tum, sim.relations, world.png.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -45,6 +49,9 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
         seed: args.seed,
         duration_secs: args.duration,
         beams: args.beams,
+        fov: args.fov_deg.to_radians(),
+        range_max: args.range_max,
+        odometry: args.odometry,
         ..SimConfig::default()
     };
     let started = Instant::now();

@@ -8,7 +8,7 @@ pub mod roadmap;
 pub mod robot;
 mod spout;
 
-pub use robot::{SimConfig, SimEvent, Simulation};
+pub use robot::{OdometryQuality, SimConfig, SimEvent, Simulation};
 pub use spout::SimSpout;
 
 use crate::{Error, Result};

@@ -7,7 +7,7 @@ use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
 use super::DEFAULT_WORLD;
-use super::robot::{SimConfig, SimEvent, Simulation};
+use super::robot::{OdometryQuality, SimConfig, SimEvent, Simulation};
 
 /// The `sim` spout's params; a param left out takes its value from
 /// [`P::default`].
@@ -29,6 +29,9 @@ struct P {
     seed: Option<u64>,
     /// Stop after this many scans; the default (`None`) is no limit.
     max_scans: Option<u64>,
+    /// The wheel odometry: `"good"`, `"poor"` or `"bad"`
+    /// ([`OdometryQuality`]). The default is `"poor"`.
+    odometry: OdometryQuality,
 }
 
 impl Default for P {
@@ -41,6 +44,7 @@ impl Default for P {
             range_max: 30.0,
             seed: None,
             max_scans: None,
+            odometry: OdometryQuality::default(),
         }
     }
 }
@@ -65,6 +69,7 @@ impl SimSpout {
             beams: params.beams,
             fov: params.fov_deg.to_radians(),
             range_max: params.range_max,
+            odometry: params.odometry,
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
