@@ -207,3 +207,55 @@ fn a_study_whose_runs_all_finish_exits_0_and_a_log_without_relations_has_empty_a
     assert_eq!(rows[1][..5], ["norel.clf", "5", "ok", "", ""]);
     assert!(rows[1][10].parse::<f64>().unwrap() > 0.0, "cpu_secs of {:?}", rows[1]);
 }
+
+#[test]
+fn simulated_worlds_are_studied_per_odometry_quality_with_their_relations() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = squall(
+        dir.path(),
+        &[
+            "study",
+            "--sim-worlds",
+            "office",
+            "--odometry",
+            "good,bad",
+            "--sim-duration",
+            "60",
+            "--seeds",
+            "1-2",
+            "--particles",
+            "10",
+            "--out",
+            "D",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let worlds = dir.path().join("D/worlds");
+    for name in ["office-good", "office-bad"] {
+        for file in [format!("{name}.clf"), format!("{name}.relations"), "ground_truth.tum".to_string()] {
+            assert!(worlds.join(name).join(&file).is_file(), "{name}/{file} missing");
+        }
+    }
+    let rows = csv_rows(&std::fs::read_to_string(dir.path().join("D/study.csv")).unwrap());
+    assert_eq!(rows.len(), 5, "a header and 2 worlds × 2 seeds: {rows:?}");
+    let column = |name: &str| rows[0].iter().position(|c| c == name).unwrap();
+    let (status, error, odometry) =
+        (column("status"), column("trans_error_m"), column("odometry_trans_error_m"));
+    let odometry_of = |log: &str| -> f64 {
+        let row = rows.iter().find(|r| r[0].contains(log)).unwrap();
+        row[odometry].parse().unwrap()
+    };
+    for row in &rows[1..] {
+        assert_eq!(row[status], "ok", "{row:?}");
+        let e: f64 = row[error].parse().unwrap();
+        assert!(e.is_finite() && e < 0.1, "{row:?}");
+    }
+    // The worlds differ only in their odometry, which scores accordingly.
+    assert!(odometry_of("office-good") < odometry_of("office-bad"), "{rows:?}");
+
+    // A world that does not exist stops the study before anything is written.
+    let out = squall(dir.path(), &["study", "--sim-worlds", "nowhere.txt", "--seeds", "1", "--out", "E"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--sim-worlds nowhere.txt"), "{}", text(&out.stderr));
+    assert!(!dir.path().join("E").exists());
+}

@@ -12,6 +12,7 @@ mod report;
 mod runner;
 mod score;
 mod svg;
+mod worlds;
 
 use std::ffi::OsString;
 use std::io::IsTerminal;
@@ -34,8 +35,19 @@ use super::{EXIT_FAILED, EXIT_INVALID};
 pub(super) struct StudyArgs {
     /// The logs, comma-separated. Each is scored against its sibling
     /// relations file (`X.relations` for `X.clf`) when there is one.
-    #[arg(long, value_name = "A.clf,B.clf", value_delimiter = ',', required = true)]
+    #[arg(long, value_name = "A.clf,B.clf", value_delimiter = ',', required_unless_present = "sim_worlds")]
     logs: Vec<PathBuf>,
+    /// Simulated worlds to study as well, comma-separated: `office` or
+    /// line-map files. Each becomes a log per `--odometry` quality
+    /// (simulator seed 1, `--sim-duration` seconds) under `DIR/worlds`.
+    #[arg(long, value_name = "office,MAP.txt", value_delimiter = ',')]
+    sim_worlds: Vec<String>,
+    /// The simulated worlds' odometry qualities, comma-separated.
+    #[arg(long, value_name = "good|poor|bad", value_delimiter = ',', default_value = "poor")]
+    odometry: Vec<squall_spouts::sim::OdometryQuality>,
+    /// Simulated seconds per world.
+    #[arg(long, value_name = "S", default_value_t = 600.0)]
+    sim_duration: f64,
     /// Seeds: single seeds and inclusive ranges, comma-separated, e.g.
     /// `1-10`, `1,2,5` or `1-3,7`.
     #[arg(long, value_name = "LIST", value_parser = parse_seeds)]
@@ -110,13 +122,33 @@ struct Log {
 
 /// Runs `squall study`.
 pub(super) fn study(args: &StudyArgs) -> ExitCode {
-    let logs = match validate(args) {
+    let simulated = match worlds::plan(&args.sim_worlds, &args.odometry, args.sim_duration) {
+        Ok(plan) => plan,
+        Err(message) => {
+            eprintln!("error: {message}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let mut logs = match validate(args, &simulated) {
         Ok(logs) => logs,
         Err(message) => {
             eprintln!("error: {message}");
             return ExitCode::from(EXIT_INVALID);
         }
     };
+    for world in &simulated {
+        let written = worlds::write(world, args.sim_duration, &args.out).and_then(|path| {
+            let relations = read_relations(&relations_of(&path)).map_err(|e| e.to_string())?;
+            Ok(Log { path, stem: world.name.clone(), relations: Some(relations) })
+        });
+        match written {
+            Ok(log) => logs.push(log),
+            Err(message) => {
+                eprintln!("error: {message}");
+                return ExitCode::from(EXIT_FAILED);
+            }
+        }
+    }
     let jobs: Vec<Job> = logs
         .iter()
         .enumerate()
@@ -155,7 +187,7 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
 /// Checks every input before anything runs: the logs exist and their
 /// folder names differ, their relations parse, the SLAM topology with
 /// these settings is valid, and the output folder is writable.
-fn validate(args: &StudyArgs) -> Result<Vec<Log>, String> {
+fn validate(args: &StudyArgs, simulated: &[worlds::World]) -> Result<Vec<Log>, String> {
     if args.jobs == Some(0) {
         return Err("--jobs must be at least 1".into());
     }
@@ -182,10 +214,19 @@ fn validate(args: &StudyArgs) -> Result<Vec<Log>, String> {
         };
         logs.push(Log { path: path.clone(), stem, relations });
     }
-    for log in &logs {
+    if let Some(w) = simulated.iter().find(|w| logs.iter().any(|l| l.stem == w.name)) {
+        return Err(format!(
+            "the simulated world {} and a log would share the run folders runs/{}-s*",
+            w.name, w.name
+        ));
+    }
+    // The settings are checked against every log, and against a CARMEN
+    // log for the simulated worlds (which do not exist yet).
+    let placeholder = simulated.first().map(|w| PathBuf::from(format!("{}.clf", w.name)));
+    for path in logs.iter().map(|l| &l.path).chain(placeholder.as_ref()) {
         let overrides = args.overrides.iter().map(|s| s.parse()).collect::<Result<Vec<_>, _>>();
         let slam = SlamArgs {
-            log: Some(log.path.clone()),
+            log: Some(path.clone()),
             particles: args.particles,
             cutoff: args.cutoff.clone(),
             matchers: 1,

@@ -1,0 +1,78 @@
+//! Simulated worlds as logs: each `--sim-worlds` world with each
+//! `--odometry` quality becomes a CARMEN log with its relations and ground
+//! truth, written once per study under `DIR/worlds/<world>-<quality>/`,
+//! and is then studied like any log.
+
+use std::path::{Path, PathBuf};
+
+use squall_spouts::sim::output::write_run;
+use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for};
+
+/// The simulator's seed for every world: the route and the sensor noise
+/// stay the same from one study to the next; the study's seeds are
+/// SLAM's.
+pub(super) const WORLD_SEED: u64 = 1;
+
+/// One simulated world at one odometry quality.
+#[derive(Debug, Clone)]
+pub(super) struct World {
+    /// `office` or a line-map file.
+    world: String,
+    odometry: OdometryQuality,
+    /// `<world>-<quality>`: its folder and its log's name.
+    pub(super) name: String,
+}
+
+/// Every (world, quality), each world checked (it exists and a robot can
+/// drive it) before anything is written.
+pub(super) fn plan(
+    worlds: &[String],
+    qualities: &[OdometryQuality],
+    duration: f64,
+) -> Result<Vec<World>, String> {
+    let positive = duration.is_finite() && duration > 0.0;
+    if !worlds.is_empty() && !positive {
+        return Err(format!("--sim-duration must be > 0 s, got {duration}"));
+    }
+    let mut plan = Vec::new();
+    for world in worlds {
+        floor_for(world, WORLD_SEED).map_err(|e| format!("--sim-worlds {world}: {e}"))?;
+        let stem =
+            Path::new(world).file_stem().map_or_else(|| world.clone(), |s| s.to_string_lossy().into_owned());
+        for &odometry in qualities {
+            let name = format!("{stem}-{}", quality_name(odometry));
+            plan.push(World { world: world.clone(), odometry, name });
+        }
+    }
+    Ok(plan)
+}
+
+fn quality_name(q: OdometryQuality) -> &'static str {
+    match q {
+        OdometryQuality::Good => "good",
+        OdometryQuality::Poor => "poor",
+        OdometryQuality::Bad => "bad",
+    }
+}
+
+/// Simulates `world` for `duration` seconds into `out/worlds/<name>/` and
+/// returns its log, `<name>.clf`, beside `<name>.relations` and
+/// `ground_truth.tum`.
+pub(super) fn write(world: &World, duration: f64, out: &Path) -> Result<PathBuf, String> {
+    let dir = out.join("worlds").join(&world.name);
+    let fail = |e: &dyn std::fmt::Display| format!("simulating {}: {e}", world.name);
+    let floor = floor_for(&world.world, WORLD_SEED).map_err(|e| fail(&e))?;
+    let config = SimConfig {
+        seed: WORLD_SEED,
+        duration_secs: duration,
+        odometry: world.odometry,
+        ..SimConfig::default()
+    };
+    let sim = Simulation::new(floor, config).map_err(|e| fail(&e))?;
+    write_run(sim, &dir).map_err(|e| fail(&e))?;
+    let log = dir.join(format!("{}.clf", world.name));
+    std::fs::rename(dir.join("sim.clf"), &log).map_err(|e| fail(&e))?;
+    std::fs::rename(dir.join("sim.relations"), dir.join(format!("{}.relations", world.name)))
+        .map_err(|e| fail(&e))?;
+    Ok(log)
+}
