@@ -96,7 +96,7 @@ fn a_study_reports_every_run_and_a_failing_log_as_failed_rows_with_exit_1() {
     let rows = csv_rows(&std::fs::read_to_string(d.join("study.csv")).unwrap());
     let header = &rows[0];
     let expected_header = "log,seed,status,error,trans_error_m,rot_error_deg,span_0_10_m,odometry_trans_error_m,\
-                           odometry_span_0_10_m,worse_than_odometry,cpu_secs,peak_rss_mb,wall_secs";
+                           odometry_span_0_10_m,worse_than_odometry,cpu_secs,peak_rss_mb,wall_secs,ate_m";
     assert_eq!(header.join(","), expected_header);
     assert_eq!(rows.len(), 5, "a header and 4 runs: {rows:?}");
     let col = |row: &[String], name: &str| row[header.iter().position(|h| h == name).unwrap()].clone();
@@ -245,10 +245,14 @@ fn simulated_worlds_are_studied_per_odometry_quality_with_their_relations() {
         let row = rows.iter().find(|r| r[0].contains(log)).unwrap();
         row[odometry].parse().unwrap()
     };
+    let ate = column("ate_m");
     for row in &rows[1..] {
         assert_eq!(row[status], "ok", "{row:?}");
         let e: f64 = row[error].parse().unwrap();
         assert!(e.is_finite() && e < 0.1, "{row:?}");
+        // Against the world's ground truth: SLAM keeps to a few centimetres.
+        let ate: f64 = row[ate].parse().unwrap();
+        assert!(ate > 0.0 && ate < 0.3, "ATE {ate} m: {row:?}");
     }
     // The worlds differ only in their odometry, which scores accordingly.
     assert!(odometry_of("office-good") < odometry_of("office-bad"), "{rows:?}");

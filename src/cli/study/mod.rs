@@ -23,6 +23,7 @@ use std::sync::mpsc;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use squall_core::eval::relations::{Relation, read_relations};
+use squall_core::trajectory::Trajectory;
 use squall_topology::fsio::write_atomic;
 
 use self::report::{Row, Status};
@@ -118,6 +119,8 @@ struct Log {
     stem: String,
     /// Its sibling relations, when there are some.
     relations: Option<Vec<Relation>>,
+    /// The true trajectory, for simulated worlds.
+    ground_truth: Option<Trajectory>,
 }
 
 /// Runs `squall study`.
@@ -139,7 +142,9 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
     for world in &simulated {
         let written = worlds::write(world, args.sim_duration, &args.out).and_then(|path| {
             let relations = read_relations(&relations_of(&path)).map_err(|e| e.to_string())?;
-            Ok(Log { path, stem: world.name.clone(), relations: Some(relations) })
+            let truth = path.with_file_name("ground_truth.tum");
+            let truth = Trajectory::read_tum(&truth).map_err(|e| e.to_string())?;
+            Ok(Log { path, stem: world.name.clone(), relations: Some(relations), ground_truth: Some(truth) })
         });
         match written {
             Ok(log) => logs.push(log),
@@ -212,7 +217,7 @@ fn validate(args: &StudyArgs, simulated: &[worlds::World]) -> Result<Vec<Log>, S
             true => Some(read_relations(&sibling).map_err(|e| e.to_string())?),
             false => None,
         };
-        logs.push(Log { path: path.clone(), stem, relations });
+        logs.push(Log { path: path.clone(), stem, relations, ground_truth: None });
     }
     if let Some(w) = simulated.iter().find(|w| logs.iter().any(|l| l.stem == w.name)) {
         return Err(format!(
@@ -374,6 +379,7 @@ fn row_of(job: &Job, log: &Log, odometry: Option<Accuracy>, outcome: Result<Meas
         status: Status::Failed,
         error: String::new(),
         accuracy: None,
+        ate_m: None,
         odometry,
         measured: None,
     };
@@ -389,10 +395,11 @@ fn row_of(job: &Job, log: &Log, odometry: Option<Accuracy>, outcome: Result<Meas
         row.error = e;
         return row;
     }
-    match score::run(&job.dir.join("trajectory.tum"), log.relations.as_deref()) {
-        Ok(accuracy) => {
+    match score::run(&job.dir.join("trajectory.tum"), log.relations.as_deref(), log.ground_truth.as_ref()) {
+        Ok(scored) => {
             row.status = Status::Ok;
-            row.accuracy = accuracy;
+            row.accuracy = scored.accuracy;
+            row.ate_m = scored.ate_m;
         }
         Err(e) => row.error = e,
     }

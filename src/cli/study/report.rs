@@ -27,6 +27,9 @@ pub(super) struct Row {
     pub(super) error: String,
     /// `None` when the run failed, or the log has no (matching) relations.
     pub(super) accuracy: Option<Accuracy>,
+    /// Absolute trajectory error against the ground truth, m (simulated
+    /// worlds).
+    pub(super) ate_m: Option<f64>,
     /// The log's raw odometry, scored the same way.
     pub(super) odometry: Option<Accuracy>,
     /// `None` when the run could not start.
@@ -128,7 +131,7 @@ fn number(v: Option<f64>, decimals: usize) -> String {
 pub(super) fn csv(rows: &[Row]) -> String {
     let mut t = String::from(
         "log,seed,status,error,trans_error_m,rot_error_deg,span_0_10_m,odometry_trans_error_m,\
-         odometry_span_0_10_m,worse_than_odometry,cpu_secs,peak_rss_mb,wall_secs\n",
+         odometry_span_0_10_m,worse_than_odometry,cpu_secs,peak_rss_mb,wall_secs,ate_m\n",
     );
     for r in rows {
         let m = r.measured.as_ref();
@@ -149,6 +152,7 @@ pub(super) fn csv(rows: &[Row]) -> String {
             number(m.map(|m| m.cpu_secs), 3),
             number(m.map(|m| m.peak_rss_mb), 1),
             number(m.map(|m| m.wall_secs), 3),
+            number(r.ate_m, 6),
         ];
         let _ = writeln!(t, "{}", fields.join(","));
     }

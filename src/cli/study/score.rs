@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use squall_core::eval::ground_truth;
 use squall_core::eval::relations::{Relation, score};
 use squall_core::trajectory::Trajectory;
 
@@ -31,14 +32,29 @@ fn accuracy(trajectory: &Trajectory, relations: &[Relation]) -> Option<Accuracy>
     })
 }
 
-/// Scores a finished run's trajectory: `Ok(None)` without relations (or
-/// none matched), `Err` when the trajectory is missing or unreadable.
-pub(super) fn run(trajectory: &Path, relations: Option<&[Relation]>) -> Result<Option<Accuracy>, String> {
+/// A finished run's scores.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Scored {
+    /// On the log's relations; `None` without relations (or none matched).
+    pub(super) accuracy: Option<Accuracy>,
+    /// Absolute trajectory error (RMSE after alignment) against the ground
+    /// truth, m, where there is one (simulated worlds).
+    pub(super) ate_m: Option<f64>,
+}
+
+/// Scores a finished run's trajectory; `Err` when it is missing or
+/// unreadable.
+pub(super) fn run(
+    trajectory: &Path,
+    relations: Option<&[Relation]>,
+    truth: Option<&Trajectory>,
+) -> Result<Scored, String> {
     let t = Trajectory::read_tum(trajectory).map_err(|e| format!("no usable trajectory: {e}"))?;
     if t.is_empty() {
         return Err(format!("{}: the trajectory has no poses", trajectory.display()));
     }
-    Ok(relations.and_then(|r| accuracy(&t, r)))
+    let ate_m = truth.map(|truth| ground_truth::score(&t, truth)).filter(|s| s.pairs > 0).map(|s| s.ate_rmse);
+    Ok(Scored { accuracy: relations.and_then(|r| accuracy(&t, r)), ate_m })
 }
 
 /// Scores the raw odometry of a CARMEN log at its scans, the first
