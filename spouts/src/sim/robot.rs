@@ -90,16 +90,26 @@ impl OdometryQuality {
     }
 }
 
+impl OdometryQuality {
+    /// Every quality, with the name that selects it.
+    const NAMED: [(OdometryQuality, &'static str); 3] =
+        [(OdometryQuality::Good, "good"), (OdometryQuality::Poor, "poor"), (OdometryQuality::Bad, "bad")];
+
+    /// The quality's name: `good`, `poor` or `bad`.
+    pub fn name(self) -> &'static str {
+        Self::NAMED.iter().find(|(q, _)| *q == self).map_or("", |(_, name)| name)
+    }
+}
+
 impl std::str::FromStr for OdometryQuality {
     type Err = Error;
 
     fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "good" => Ok(OdometryQuality::Good),
-            "poor" => Ok(OdometryQuality::Poor),
-            "bad" => Ok(OdometryQuality::Bad),
-            other => Err(Error::OdometryQuality(other.to_string())),
-        }
+        Self::NAMED
+            .iter()
+            .find(|(_, name)| *name == s)
+            .map(|(q, _)| *q)
+            .ok_or_else(|| Error::OdometryQuality(s.to_string()))
     }
 }
 

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use squall_spouts::sim::office::Floor;
 use squall_spouts::sim::output::write_run;
 use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for};
 
@@ -16,8 +17,8 @@ pub(super) const WORLD_SEED: u64 = 1;
 /// One simulated world at one odometry quality.
 #[derive(Debug, Clone)]
 pub(super) struct World {
-    /// `office` or a line-map file.
-    world: String,
+    /// The floor of `office` or of a line-map file, built once.
+    floor: Floor,
     odometry: OdometryQuality,
     /// `<world>-<quality>`: its folder and its log's name.
     pub(super) name: String,
@@ -36,23 +37,15 @@ pub(super) fn plan(
     }
     let mut plan = Vec::new();
     for world in worlds {
-        floor_for(world, WORLD_SEED).map_err(|e| format!("--sim-worlds {world}: {e}"))?;
+        let floor = floor_for(world, WORLD_SEED).map_err(|e| format!("--sim-worlds {world}: {e}"))?;
         let stem =
             Path::new(world).file_stem().map_or_else(|| world.clone(), |s| s.to_string_lossy().into_owned());
         for &odometry in qualities {
-            let name = format!("{stem}-{}", quality_name(odometry));
-            plan.push(World { world: world.clone(), odometry, name });
+            let name = format!("{stem}-{}", odometry.name());
+            plan.push(World { floor: floor.clone(), odometry, name });
         }
     }
     Ok(plan)
-}
-
-fn quality_name(q: OdometryQuality) -> &'static str {
-    match q {
-        OdometryQuality::Good => "good",
-        OdometryQuality::Poor => "poor",
-        OdometryQuality::Bad => "bad",
-    }
 }
 
 /// Simulates `world` for `duration` seconds into `out/worlds/<name>/` and
@@ -61,14 +54,13 @@ fn quality_name(q: OdometryQuality) -> &'static str {
 pub(super) fn write(world: &World, duration: f64, out: &Path) -> Result<PathBuf, String> {
     let dir = out.join("worlds").join(&world.name);
     let fail = |e: &dyn std::fmt::Display| format!("simulating {}: {e}", world.name);
-    let floor = floor_for(&world.world, WORLD_SEED).map_err(|e| fail(&e))?;
     let config = SimConfig {
         seed: WORLD_SEED,
         duration_secs: duration,
         odometry: world.odometry,
         ..SimConfig::default()
     };
-    let sim = Simulation::new(floor, config).map_err(|e| fail(&e))?;
+    let sim = Simulation::new(world.floor.clone(), config).map_err(|e| fail(&e))?;
     write_run(sim, &dir).map_err(|e| fail(&e))?;
     let log = dir.join(format!("{}.clf", world.name));
     std::fs::rename(dir.join("sim.clf"), &log).map_err(|e| fail(&e))?;

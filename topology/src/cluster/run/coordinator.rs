@@ -258,7 +258,8 @@ impl Gathered {
             self.outcomes[c][t] = Some(o);
         }
         self.add_traffic(local.link.traffic());
-        self.refused = local.link.rejections.totals();
+        let (large, bad) = local.link.rejections.totals();
+        self.refused = (self.refused.0 + large, self.refused.1 + bad);
     }
 
     /// Waits (at most `COLLECT`) for every worker still in the run to hand
