@@ -9,6 +9,7 @@
 //! (`squall-bolts`) share it without depending on each other.
 
 pub mod camera;
+pub mod covariance;
 pub mod depth_render;
 mod error;
 pub mod eval;

@@ -7,6 +7,7 @@ use rand::Rng;
 
 use serde::{Deserialize, Serialize};
 
+use crate::covariance::{Mat3, add, mul, symmetric, transpose};
 use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::random::standard_normal;
 
@@ -25,6 +26,19 @@ pub struct MotionNoise {
     pub stt: Real,
 }
 
+/// The standard deviations (x, y, θ) of the noise the model adds to an
+/// odometry step `d` (in the earlier pose's frame): each grows with the
+/// step's translation and rotation, as in GMapping (the sideways term is
+/// `0.3 · srr`).
+pub fn step_deviations(d: &Pose2, o: &MotionNoise) -> [Real; 3] {
+    let sxy = 0.3 * o.srr;
+    [
+        o.srr * d.x.abs() + o.str * d.theta.abs() + sxy * d.y.abs(),
+        o.srr * d.y.abs() + o.str * d.theta.abs() + sxy * d.x.abs(),
+        o.stt * d.theta.abs() + o.srt * d.x.hypot(d.y),
+    ]
+}
+
 /// `pose` moved by the odometry step `old → new`, with noise.
 pub fn sample_motion<R: Rng + ?Sized>(
     pose: &Pose2,
@@ -34,16 +48,43 @@ pub fn sample_motion<R: Rng + ?Sized>(
     rng: &mut R,
 ) -> Pose2 {
     let d = new.relative_to(old);
-    let sxy = 0.3 * o.srr;
-    let x = d.x + standard_normal(rng) * (o.srr * d.x.abs() + o.str * d.theta.abs() + sxy * d.y.abs());
-    let y = d.y + standard_normal(rng) * (o.srr * d.y.abs() + o.str * d.theta.abs() + sxy * d.x.abs());
-    let theta = d.theta + standard_normal(rng) * (o.stt * d.theta.abs() + o.srt * d.x.hypot(d.y));
+    let [sx, sy, st] = step_deviations(&d, o);
+    let x = d.x + standard_normal(rng) * sx;
+    let y = d.y + standard_normal(rng) * sy;
+    let theta = d.theta + standard_normal(rng) * st;
     pose.compose(&Pose2::new(x, y, normalize_angle(theta)))
+}
+
+/// `pose` moved by the odometry step `old → new` without noise, and
+/// `covariance` (world frame, x, y, θ) grown by the step: the earlier
+/// uncertainty carried through the step (a heading error swings the
+/// translation) plus the step's own noise ([`step_deviations`]) turned
+/// into the world frame. Over many steps this is the spread of
+/// [`sample_motion`]'s draws, to first order.
+pub fn propagate_motion(
+    pose: &Pose2,
+    covariance: &mut Mat3,
+    old: &Pose2,
+    new: &Pose2,
+    o: &MotionNoise,
+) -> Pose2 {
+    let d = new.relative_to(old);
+    let (s, c) = pose.theta.sin_cos();
+    // ∂(pose ⊕ d)/∂pose and ∂(pose ⊕ (d + n))/∂n.
+    let f = [[1.0, 0.0, -(s * d.x + c * d.y)], [0.0, 1.0, c * d.x - s * d.y], [0.0, 0.0, 1.0]];
+    let g = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    let [sx, sy, st] = step_deviations(&d, o);
+    let q = [[sx * sx, 0.0, 0.0], [0.0, sy * sy, 0.0], [0.0, 0.0, st * st]];
+    let carried = mul(&mul(&f, covariance), &transpose(&f));
+    let added = mul(&mul(&g, &q), &transpose(&g));
+    *covariance = symmetric(&add(&carried, &added));
+    pose.compose(&d)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::covariance::ZERO;
     use rand::SeedableRng;
 
     /// GMapping's default noise (srr 0.1, srt 0.2, str 0.1, stt 0.2).
@@ -78,5 +119,37 @@ mod tests {
         let o = Pose2::new(5.0, 5.0, 0.1);
         let moved = sample_motion(&p, &o, &o, &GMAPPING, &mut rng);
         assert!(moved.distance(&p) < 1e-12 && (moved.theta - p.theta).abs() < 1e-12, "{moved:?}");
+    }
+
+    #[test]
+    fn propagated_covariance_is_the_spread_of_the_draws() {
+        // Ten steps of 0.15 m with a slight turn: the heading noise of the
+        // early steps swings the later translation sideways.
+        let step = Pose2::new(0.15, 0.0, 0.03);
+        let odometry: Vec<Pose2> = (0..=10)
+            .scan(Pose2::new(0.0, 0.0, 0.3), |p, _| Some(std::mem::replace(p, p.compose(&step))))
+            .collect();
+        let start = Pose2::new(1.0, -2.0, 0.7);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let n = 20_000;
+        let ends: Vec<Pose2> = (0..n)
+            .map(|_| {
+                odometry.windows(2).fold(start, |p, w| sample_motion(&p, &w[0], &w[1], &GMAPPING, &mut rng))
+            })
+            .collect();
+        let (mut cov, mut mean) = (ZERO, start);
+        for w in odometry.windows(2) {
+            mean = propagate_motion(&mean, &mut cov, &w[0], &w[1], &GMAPPING);
+        }
+        let v = |p: &Pose2| [p.x - mean.x, p.y - mean.y, normalize_angle(p.theta - mean.theta)];
+        for i in 0..3 {
+            for j in 0..3 {
+                let sampled = ends.iter().map(|p| v(p)[i] * v(p)[j]).sum::<Real>() / n as Real;
+                let scale = (cov[i][i] * cov[j][j]).sqrt();
+                assert!((sampled - cov[i][j]).abs() < 0.08 * scale, "({i},{j}): {sampled} vs {}", cov[i][j]);
+            }
+        }
+        let m = |k: usize| ends.iter().map(|p| v(p)[k]).sum::<Real>() / n as Real;
+        assert!(m(0).abs() < 0.01 && m(1).abs() < 0.01 && m(2).abs() < 0.01);
     }
 }

@@ -5,14 +5,15 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use squall_spouts::sim::output::write_run;
-use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for};
+use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for, laser_range_for, top_speed_for};
 
 use super::{EXIT_FAILED, EXIT_INVALID};
 
 #[derive(Debug, clap::Args)]
 pub(super) struct SimArgs {
-    /// The world: `office` (generated from the seed) or a line-map file
-    /// (`x1,y1,x2,y2` per line, metres).
+    /// The world: `office` or `campus` (a 320 × 220 m open site; both
+    /// generated from the seed) or a line-map file (`x1,y1,x2,y2` per
+    /// line, metres).
     #[arg(long, default_value = "office")]
     world: String,
     /// Simulated seconds.
@@ -27,9 +28,10 @@ pub(super) struct SimArgs {
     /// Laser field of view, degrees.
     #[arg(long, default_value_t = 180.0)]
     fov_deg: f64,
-    /// Laser range, metres (farther walls give no return).
-    #[arg(long, default_value_t = 30.0)]
-    range_max: f64,
+    /// Laser range, metres (farther walls give no return). The default is
+    /// 80 on the campus, 30 elsewhere.
+    #[arg(long)]
+    range_max: Option<f64>,
     /// Wheel odometry: good (0.2–0.5% scale error, 0.02–0.05°/m heading
     /// drift), poor (1–2%, 0.15–0.35°/m) or bad (3–5%, 0.5–0.8°/m).
     #[arg(long, default_value = "poor", value_name = "good|poor|bad")]
@@ -50,7 +52,8 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
         duration_secs: args.duration,
         beams: args.beams,
         fov: args.fov_deg.to_radians(),
-        range_max: args.range_max,
+        range_max: args.range_max.unwrap_or_else(|| laser_range_for(&args.world)),
+        max_speed: top_speed_for(&args.world),
         odometry: args.odometry,
         ..SimConfig::default()
     };

@@ -236,7 +236,13 @@ impl ParticleModel for CgrModel {
         *pose = sample_motion(pose, &step.from, &step.to, &self.options.motion, rng);
     }
 
-    fn correct(&self, pose: &mut Pose2, input: &Observation2d, (): &mut ()) -> Correction {
+    fn correct(
+        &self,
+        pose: &mut Pose2,
+        input: &Observation2d,
+        (): &mut (),
+        _: &mut ChaCha8Rng,
+    ) -> Correction {
         let (refined, e, evaluations) =
             refine(&self.map, &mut |p: &Pose2| self.lines_at(p), pose, input, &self.options.cgr);
         *pose = refined;

@@ -208,7 +208,13 @@ impl ParticleModel for ParfilModel {
         *pose = o.drive(pose, forward, turn);
     }
 
-    fn correct(&self, pose: &mut Pose2, input: &ParfilReading, (): &mut ()) -> Correction {
+    fn correct(
+        &self,
+        pose: &mut Pose2,
+        input: &ParfilReading,
+        (): &mut (),
+        _: &mut ChaCha8Rng,
+    ) -> Correction {
         let expected = self.options.bearings(pose);
         let per_sigma = 1.0 / self.options.bearing_noise;
         let log_likelihood = expected

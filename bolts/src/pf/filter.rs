@@ -112,7 +112,9 @@ where
 
     fn correct(&mut self, input: &M::Input) -> StepReport {
         let model = &self.model;
-        let mut reports: Vec<_> = self.shards.iter_mut().flat_map(|s| s.correct(model, input)).collect();
+        let step = self.step;
+        let mut reports: Vec<_> =
+            self.shards.iter_mut().flat_map(|s| s.correct(model, step, input)).collect();
         reports.sort_by_key(|r| r.slot);
         let population = self.population.as_mut().expect("started");
         let poses: Vec<(Pose2, Real)> = reports.iter().map(|r| (r.pose, r.log_likelihood)).collect();

@@ -61,13 +61,15 @@ pub trait ParticleModel: Send + Sync + 'static {
         let _ = (input, scratch);
     }
 
-    /// Refines a particle against a correcting reading; returns its
+    /// Refines a particle against a correcting reading, drawing from `rng`
+    /// where the refinement samples (SLAM's Gaussian proposal); returns its
     /// log-likelihood and the work spent.
     fn correct(
         &self,
         state: &mut Self::State,
         input: &Self::Input,
         scratch: &mut Self::Scratch,
+        rng: &mut ChaCha8Rng,
     ) -> Correction;
 
     /// Adds a correcting reading to a particle after resampling; returns

@@ -16,6 +16,10 @@ use squall_core::random::stream_for_step;
 /// `INJECTION_STREAM + j`), apart from every particle's own stream.
 pub const INJECTION_STREAM: u64 = 1 << 40;
 
+/// Offset of the random streams of corrections (slot j uses
+/// `CORRECTION_STREAM + j`), apart from prediction's and injection's.
+pub const CORRECTION_STREAM: u64 = 1 << 41;
+
 /// A pose a particle held at a correcting reading, linked to its
 /// ancestor's.
 #[derive(Debug)]

@@ -10,7 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::pf::model::{Correction, ParticleModel};
-use crate::pf::population::INJECTION_STREAM;
+use crate::pf::population::{CORRECTION_STREAM, INJECTION_STREAM};
 use squall_core::geometry::{Pose2, Real};
 use squall_core::random::stream_for_step;
 
@@ -105,14 +105,17 @@ impl<M: ParticleModel> Shard<M> {
         }
     }
 
-    /// Corrects every held particle against a reading.
-    pub fn correct(&mut self, model: &M, input: &M::Input) -> Vec<SlotReport> {
+    /// Corrects every held particle against reading `step`.
+    pub fn correct(&mut self, model: &M, step: u64, input: &M::Input) -> Vec<SlotReport> {
         let scratch = &mut self.scratch;
         model.prepare(input, scratch);
+        let seed = self.seed;
         self.held
             .iter_mut()
             .map(|(slot, state)| {
-                let Correction { log_likelihood, evaluations, fit } = model.correct(state, input, scratch);
+                let mut rng = stream_for_step(seed, step, CORRECTION_STREAM + *slot as u64);
+                let Correction { log_likelihood, evaluations, fit } =
+                    model.correct(state, input, scratch, &mut rng);
                 let (pose, bytes) = (model.pose(state), model.state_bytes(state));
                 SlotReport { slot: *slot, pose, log_likelihood, evaluations, bytes, fit }
             })
@@ -250,7 +253,13 @@ mod tests {
         fn predict(&self, s: &mut Vec<f64>, c: &f64, rng: &mut rand_chacha::ChaCha8Rng) {
             s.push(s.last().unwrap() + c + rng.random::<f64>());
         }
-        fn correct(&self, s: &mut Vec<f64>, input: &f64, (): &mut ()) -> Correction {
+        fn correct(
+            &self,
+            s: &mut Vec<f64>,
+            input: &f64,
+            (): &mut (),
+            _: &mut rand_chacha::ChaCha8Rng,
+        ) -> Correction {
             let log_likelihood = -(s.last().unwrap() - input).powi(2);
             Correction { log_likelihood, evaluations: 1, fit: log_likelihood }
         }

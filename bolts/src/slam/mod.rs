@@ -12,6 +12,7 @@ pub(crate) mod matcher;
 pub mod model;
 pub(crate) mod old_map;
 pub mod options;
+pub(crate) mod proposal;
 #[cfg(test)]
 mod scenes;
 pub(crate) mod transfer;

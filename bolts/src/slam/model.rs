@@ -12,9 +12,11 @@ use crate::slam::grid::{TILE_BYTES, TiledGrid};
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::old_map::{MapHistory, search_old_map};
-use crate::slam::options::SlamOptions;
+use crate::slam::options::{Proposal, SlamOptions};
+use crate::slam::proposal::draw;
+use squall_core::covariance::{Mat3, ZERO};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
-use squall_core::motion::sample_motion;
+use squall_core::motion::{propagate_motion, sample_motion};
 use squall_core::sensor::LaserReading;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
@@ -27,6 +29,13 @@ pub struct SlamParticle {
     pub map: TiledGrid,
     /// Snapshots of the map for the old-map search.
     pub history: MapHistory,
+    /// Covariance of the odometry's prediction since the last correcting
+    /// reading (world frame x, y, θ), for the Gaussian proposal.
+    pub motion: Mat3,
+    /// Where the Gaussian proposal's climb starts: the prediction with the
+    /// motion model's noise drawn, as GMapping's; `None` right after a
+    /// correction.
+    pub noisy: Option<Pose2>,
 }
 
 impl SlamParticle {
@@ -109,7 +118,7 @@ impl ParticleModel for SlamModel {
             .expect("SlamModel::new checked delta > 0 and occupied_threshold in [0, 1)");
         integrate_scan(&mut map, &first.odometry, first, o.max_urange);
         map.take_clone_count();
-        SlamParticle { pose: first.odometry, map, history: MapHistory::default() }
+        SlamParticle { pose: first.odometry, map, history: MapHistory::default(), motion: ZERO, noisy: None }
     }
 
     fn mark(&self, input: &LaserReading) -> (f64, Pose2) {
@@ -132,21 +141,53 @@ impl ParticleModel for SlamModel {
     }
 
     fn predict(&self, p: &mut SlamParticle, step: &OdometryStep, rng: &mut ChaCha8Rng) {
-        p.pose = sample_motion(&p.pose, &step.from, &step.to, &self.options.motion_noise(), rng);
+        let noise = self.options.motion_noise();
+        p.pose = match self.options.proposal {
+            Proposal::Climb => sample_motion(&p.pose, &step.from, &step.to, &noise, rng),
+            Proposal::Gaussian => {
+                // The climb starts from a noisy draw, so that relatives
+                // explore different modes; the draw's prior is the
+                // noise-free prediction and its covariance.
+                let from = p.noisy.unwrap_or(p.pose);
+                p.noisy = Some(sample_motion(&from, &step.from, &step.to, &noise, rng));
+                propagate_motion(&p.pose, &mut p.motion, &step.from, &step.to, &noise)
+            }
+        };
     }
 
     fn prepare(&self, input: &LaserReading, scratch: &mut SlamScratch) {
         scratch.prepared = Some(PreparedScan::new(input, &self.options));
     }
 
-    fn correct(&self, p: &mut SlamParticle, input: &LaserReading, scratch: &mut SlamScratch) -> Correction {
+    fn correct(
+        &self,
+        p: &mut SlamParticle,
+        input: &LaserReading,
+        scratch: &mut SlamScratch,
+        rng: &mut ChaCha8Rng,
+    ) -> Correction {
+        let o = &self.options;
         let SlamScratch { prepared, matcher } = scratch;
-        let prepared = prepared.get_or_insert_with(|| PreparedScan::new(input, &self.options));
-        let climbed = matcher.refine(&p.map, &p.pose, prepared, &self.options);
-        let m = search_old_map(matcher, &p.map, &p.history, climbed, prepared, &self.options);
-        // A climb that matched nothing leaves the pose where it was.
-        p.pose = m.pose;
-        Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations, fit: m.log_likelihood }
+        let prepared = prepared.get_or_insert_with(|| PreparedScan::new(input, o));
+        let start = p.noisy.take().unwrap_or(p.pose);
+        let climbed = matcher.refine(&p.map, &start, prepared, o);
+        let m = search_old_map(matcher, &p.map, &p.history, climbed, prepared, o);
+        let fit = m.log_likelihood;
+        match o.proposal {
+            Proposal::Climb => {
+                // A climb that matched nothing leaves the pose where it was.
+                p.pose = m.pose;
+                Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations, fit }
+            }
+            Proposal::Gaussian => {
+                let information = matcher.information(&p.map, &m.pose, prepared, o);
+                let drawn = draw(&m.pose, &information, &p.pose, &p.motion, rng);
+                p.pose = drawn.pose;
+                p.motion = ZERO;
+                let log_likelihood = m.log_likelihood + drawn.log_agreement;
+                Correction { log_likelihood, evaluations: m.evaluations, fit }
+            }
+        }
     }
 
     fn update(&self, p: &mut SlamParticle, input: &LaserReading) -> u64 {

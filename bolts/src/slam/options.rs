@@ -51,6 +51,23 @@ impl From<Cutoff> for CutoffText {
     }
 }
 
+/// How a particle's pose is drawn at a correcting reading.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Proposal {
+    /// GMapping's: the motion model's noise is drawn at every reading and
+    /// the scan matcher climbs from the noisy pose to the nearest mode,
+    /// which becomes the pose.
+    Climb,
+    /// The improved proposal in closed form ([`crate::slam::proposal`]):
+    /// the matcher climbs from a noisy draw as GMapping's does (relatives
+    /// explore different modes), then the pose is drawn from the product
+    /// of the scan's Gaussian (its information matrix at the mode) and
+    /// the motion model's around the odometry's noise-free prediction; the
+    /// weight gains how well the two agree.
+    Gaussian,
+}
+
 /// SLAM settings; `Default` gives GMapping's ROS defaults, but matches
 /// every other beam (`lskip` 1 where GMapping's is 0).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -143,6 +160,9 @@ pub struct SlamOptions {
     /// How the new set is drawn: `"low_variance"` (GMapping's, the
     /// default), `"ring"` (the thesis's sparse graph) or `"aggregation"`.
     pub resampling: Scheme,
+    /// How poses are drawn: `"gaussian"` or `"climb"` (GMapping's). The
+    /// default is `"gaussian"`.
+    pub proposal: Proposal,
 }
 
 impl Default for SlamOptions {
@@ -178,6 +198,7 @@ impl Default for SlamOptions {
             old_map_turn: 0.1,
             between_scans: BetweenScans::Interpolate,
             resampling: Scheme::LowVariance,
+            proposal: Proposal::Gaussian,
         }
     }
 }

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
+use squall_core::covariance::Mat3;
 use squall_core::geometry::Pose2;
 use squall_core::sensor::LaserReading;
 use squall_topology::{CodecError, Incremental};
@@ -35,6 +36,8 @@ struct PackedParticle {
     updates: u64,
     recent: Option<PackedGrid>,
     old: Option<PackedGrid>,
+    motion: Mat3,
+    noisy: Option<Pose2>,
 }
 
 impl PackedParticle {
@@ -42,7 +45,16 @@ impl PackedParticle {
         let map = pack(&p.map, sent);
         let recent = p.history.recent.as_ref().map(|g| pack(g, sent));
         let old = p.history.old.as_ref().map(|g| pack(g, sent));
-        PackedParticle { slot, pose: p.pose, map, updates: p.history.updates, recent, old }
+        PackedParticle {
+            slot,
+            pose: p.pose,
+            map,
+            updates: p.history.updates,
+            recent,
+            old,
+            motion: p.motion,
+            noisy: p.noisy,
+        }
     }
 
     fn unpack(self, held: &mut TileStore) -> Result<(u32, SlamParticle), UnpackError> {
@@ -50,7 +62,10 @@ impl PackedParticle {
         let recent = self.recent.map(|g| held.unpack(g)).transpose()?;
         let old = self.old.map(|g| held.unpack(g)).transpose()?;
         let history = MapHistory { updates: self.updates, recent, old };
-        Ok((self.slot, SlamParticle { pose: self.pose, map, history }))
+        Ok((
+            self.slot,
+            SlamParticle { pose: self.pose, map, history, motion: self.motion, noisy: self.noisy },
+        ))
     }
 }
 
@@ -85,7 +100,9 @@ mod tests {
         for i in 0..walls {
             map.update((i, 10), |c| c.add_hit(i as f32 * 0.05, 0.5));
         }
-        SlamParticle { pose: Pose2::new(x, 0.0, 0.1), map, history: MapHistory::default() }
+        let motion = [[0.01, 0.0, 0.001], [0.0, 0.02, 0.0], [0.001, 0.0, 0.003]];
+        let noisy = Some(Pose2::new(x + 0.1, 0.05, 0.12));
+        SlamParticle { pose: Pose2::new(x, 0.0, 0.1), map, history: MapHistory::default(), motion, noisy }
     }
 
     #[test]
@@ -99,6 +116,7 @@ mod tests {
         assert_eq!(back.step, 3);
         assert_eq!(back.states.iter().map(|s| s.0).collect::<Vec<_>>(), vec![0, 5]);
         assert_eq!(back.states[1].1.pose, parent.pose);
+        assert_eq!((back.states[1].1.motion, back.states[1].1.noisy), (parent.motion, parent.noisy));
         assert_eq!(back.states[1].1.map.get((7, 10)), parent.map.get((7, 10)));
         let plain = postcard::to_stdvec(&first).unwrap().len();
         // The second state refers to the first's tiles.

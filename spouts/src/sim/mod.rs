@@ -1,6 +1,7 @@
 //! The simulated world: line maps or a generated office, a robot exploring
 //! it, a laser and wheel odometry, with ground truth.
 
+pub mod campus;
 pub mod office;
 pub mod output;
 pub mod people;
@@ -22,11 +23,29 @@ pub const ROADMAP_MARGIN: f64 = 0.35;
 /// params name none: the generated office.
 pub const DEFAULT_WORLD: &str = "office";
 
-/// The floor for a world name: `office` (generated from `seed`) or the path
-/// of a line-map file (with a roadmap through it).
+/// The generated open site ([`campus`]), a world name like `office`.
+pub const CAMPUS_WORLD: &str = "campus";
+
+/// The laser range a world is simulated with unless told otherwise,
+/// metres: 80 on the open campus, 30 indoors.
+pub fn laser_range_for(world: &str) -> f64 {
+    if world == CAMPUS_WORLD { campus::CAMPUS_RANGE } else { 30.0 }
+}
+
+/// The robot's top speed in a world, m/s: 1.5 on the open campus (so
+/// that ten minutes cross it and close loops), 0.6 indoors.
+pub fn top_speed_for(world: &str) -> f64 {
+    if world == CAMPUS_WORLD { campus::CAMPUS_SPEED } else { SimConfig::default().max_speed }
+}
+
+/// The floor for a world name: `office` or `campus` (generated from
+/// `seed`) or the path of a line-map file (with a roadmap through it).
 pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor> {
     if world == "office" {
         return Ok(office::office(seed, 3, 2));
+    }
+    if world == CAMPUS_WORLD {
+        return campus::campus(seed).map_err(|source| Error::Roadmap { world: world.to_string(), source });
     }
     let walls = squall_core::linemap::LineMap::load(std::path::Path::new(world))?;
     roadmap::roadmap(walls, ROADMAP_SPACING, ROADMAP_MARGIN)

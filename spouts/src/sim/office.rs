@@ -80,7 +80,7 @@ fn wall_with_door(walls: &mut Vec<Segment>, a: (Real, Real), b: (Real, Real), at
     wall(walls, p(at + DOOR_WIDTH), b);
 }
 
-fn rect(walls: &mut Vec<Segment>, x0: Real, y0: Real, x1: Real, y1: Real) {
+pub(crate) fn rect(walls: &mut Vec<Segment>, x0: Real, y0: Real, x1: Real, y1: Real) {
     wall(walls, (x0, y0), (x1, y0));
     wall(walls, (x1, y0), (x1, y1));
     wall(walls, (x1, y1), (x0, y1));

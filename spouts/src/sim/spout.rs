@@ -6,8 +6,8 @@ use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
-use super::DEFAULT_WORLD;
 use super::robot::{OdometryQuality, SimConfig, SimEvent, Simulation};
+use super::{DEFAULT_WORLD, laser_range_for, top_speed_for};
 
 /// The `sim` spout's params; a param left out takes its value from
 /// [`P::default`].
@@ -23,8 +23,9 @@ struct P {
     beams: usize,
     /// Field of view, degrees. The default is 180.
     fov_deg: f64,
-    /// Laser range, metres. The default is 30.
-    range_max: f64,
+    /// Laser range, metres. The default is 80 on the campus, 30
+    /// elsewhere ([`laser_range_for`]).
+    range_max: Option<f64>,
     /// Seed; the default (`None`) is the topology's seed.
     seed: Option<u64>,
     /// Stop after this many scans; the default (`None`) is no limit.
@@ -41,7 +42,7 @@ impl Default for P {
             duration_secs: 600.0,
             beams: 180,
             fov_deg: 180.0,
-            range_max: 30.0,
+            range_max: None,
             seed: None,
             max_scans: None,
             odometry: OdometryQuality::default(),
@@ -68,7 +69,8 @@ impl SimSpout {
             duration_secs: params.duration_secs,
             beams: params.beams,
             fov: params.fov_deg.to_radians(),
-            range_max: params.range_max,
+            range_max: params.range_max.unwrap_or_else(|| laser_range_for(&params.world)),
+            max_speed: top_speed_for(&params.world),
             odometry: params.odometry,
             ..SimConfig::default()
         };
@@ -119,7 +121,7 @@ mod tests {
     fn params_left_out_take_the_documented_defaults() {
         let p: P = Params::new(toml::Table::new(), 7, 1).parse().unwrap();
         assert_eq!((p.world.as_str(), p.duration_secs, p.beams), ("office", 600.0, 180));
-        assert_eq!((p.fov_deg, p.range_max, p.seed, p.max_scans), (180.0, 30.0, None, None));
+        assert_eq!((p.fov_deg, p.range_max, p.seed, p.max_scans), (180.0, None, None, None));
         let spout = SimSpout::from_params(&Params::new(toml::Table::new(), 7, 1)).unwrap();
         assert_eq!(spout.config, SimConfig { seed: 7, fov: 180f64.to_radians(), ..SimConfig::default() });
         let e =

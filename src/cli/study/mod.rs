@@ -38,10 +38,11 @@ pub(super) struct StudyArgs {
     /// relations file (`X.relations` for `X.clf`) when there is one.
     #[arg(long, value_name = "A.clf,B.clf", value_delimiter = ',', required_unless_present = "sim_worlds")]
     logs: Vec<PathBuf>,
-    /// Simulated worlds to study as well, comma-separated: `office` or
-    /// line-map files. Each becomes a log per `--odometry` quality
-    /// (simulator seed 1, `--sim-duration` seconds) under `DIR/worlds`.
-    #[arg(long, value_name = "office,MAP.txt", value_delimiter = ',')]
+    /// Simulated worlds to study as well, comma-separated: `office`,
+    /// `campus` (a large open site, 80 m laser) or line-map files. Each
+    /// becomes a log per `--odometry` quality (simulator seed 1,
+    /// `--sim-duration` seconds) under `DIR/worlds`.
+    #[arg(long, value_name = "office,campus,MAP.txt", value_delimiter = ',')]
     sim_worlds: Vec<String>,
     /// The simulated worlds' odometry qualities, comma-separated.
     #[arg(long, value_name = "good|poor|bad", value_delimiter = ',', default_value = "poor")]

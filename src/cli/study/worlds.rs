@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use squall_spouts::sim::office::Floor;
 use squall_spouts::sim::output::write_run;
-use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for};
+use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for, laser_range_for, top_speed_for};
 
 /// The simulator's seed for every world: the route and the sensor noise
 /// stay the same from one study to the next; the study's seeds are
@@ -22,6 +22,10 @@ pub(super) struct World {
     odometry: OdometryQuality,
     /// `<world>-<quality>`: its folder and its log's name.
     pub(super) name: String,
+    /// The laser's range in this world, metres.
+    range_max: f64,
+    /// The robot's top speed, m/s.
+    max_speed: f64,
 }
 
 /// Every (world, quality), each world checked (it exists and a robot can
@@ -42,7 +46,13 @@ pub(super) fn plan(
             Path::new(world).file_stem().map_or_else(|| world.clone(), |s| s.to_string_lossy().into_owned());
         for &odometry in qualities {
             let name = format!("{stem}-{}", odometry.name());
-            plan.push(World { floor: floor.clone(), odometry, name });
+            plan.push(World {
+                floor: floor.clone(),
+                odometry,
+                name,
+                range_max: laser_range_for(world),
+                max_speed: top_speed_for(world),
+            });
         }
     }
     Ok(plan)
@@ -58,6 +68,8 @@ pub(super) fn write(world: &World, duration: f64, out: &Path) -> Result<PathBuf,
         seed: WORLD_SEED,
         duration_secs: duration,
         odometry: world.odometry,
+        range_max: world.range_max,
+        max_speed: world.max_speed,
         ..SimConfig::default()
     };
     let sim = Simulation::new(world.floor.clone(), config).map_err(|e| fail(&e))?;

@@ -260,7 +260,7 @@ impl<M: HostedModel> Matcher<M> {
             return Ok(out.emit("report", Report::Predicted { step, task, tasks, mark }).await?);
         }
         let started = Instant::now();
-        let slots = shard.correct(&self.model, &reading.input);
+        let slots = shard.correct(&self.model, step, &reading.input);
         let busy_us = started.elapsed().as_micros() as u64;
         out.record("correct_us", busy_us);
         for s in &slots {

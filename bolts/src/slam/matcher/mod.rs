@@ -24,6 +24,7 @@
 mod beam_cache;
 mod fast_exp;
 mod headings;
+mod information;
 mod scan;
 mod score;
 #[cfg(test)]

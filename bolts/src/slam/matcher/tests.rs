@@ -256,3 +256,59 @@ fn the_cutoff_bounds_evaluations() {
     assert_eq!(cut.evaluations, 10);
     assert!(cut.score <= free.score);
 }
+
+/// Eigenvalues of the 2 × 2 translation block of an information matrix,
+/// least first, with the least one's direction.
+fn translation_eigen(h: &squall_core::covariance::Mat3) -> (Real, Real, (Real, Real)) {
+    let (a, b, d) = (h[0][0], h[0][1], h[1][1]);
+    let mean = (a + d) / 2.0;
+    let spread = (((a - d) / 2.0).powi(2) + b * b).sqrt();
+    let least = mean - spread;
+    // (b, least − a) is an eigenvector for the least eigenvalue (or x when b = 0).
+    let v = if b.abs() > 1e-12 {
+        (b, least - a)
+    } else if a <= d {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let n = v.0.hypot(v.1);
+    (least, mean + spread, (v.0 / n, v.1 / n))
+}
+
+#[test]
+fn a_corridor_scan_says_nothing_along_the_corridor() {
+    // Two walls 2 m apart, 40 m long, along x at 30°: the scan from the
+    // middle fixes the position across the corridor and the heading, not
+    // the position along it.
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let at = |x: Real, y: Real| (10.0 + c * x - s * y, 10.0 + s * x + c * y);
+    let wall = |y: Real| {
+        let (a, b) = (at(-20.0, y), at(20.0, y));
+        format!("{},{},{},{}\n", a.0, a.1, b.0, b.1)
+    };
+    let world = squall_core::linemap::LineMap::parse("corridor", &(wall(-1.0) + &wall(1.0))).unwrap();
+    let centre = at(0.0, 0.0);
+    let truth = Pose2::new(centre.0, centre.1, 30f64.to_radians() + 0.2);
+    let grid = mapped(&world, &[truth, Pose2::new(at(1.0, 0.3).0, at(1.0, 0.3).1, 0.9)]);
+    let o = SlamOptions::default();
+    let scan = PreparedScan::new(&scan_of(&world, &truth), &o);
+    let h = Matcher::default().information(&grid, &truth, &scan, &o);
+    let (least, most, along) = translation_eigen(&h);
+    assert!(least < 1e-3 * most, "along the corridor {least} against across {most}");
+    assert!((along.0 * c + along.1 * s).abs() > 0.99, "the blind direction is the corridor's: {along:?}");
+    assert!(h[2][2] > 1e4, "the walls fix the heading: {}", h[2][2]);
+}
+
+#[test]
+fn a_room_scan_fixes_every_direction() {
+    let (grid, truth, o, scan) = scene();
+    let h = Matcher::default().information(&grid, &truth, &scan, &o);
+    let (least, most, _) = translation_eigen(&h);
+    assert!(least > 0.1 * most, "{least} against {most}");
+    assert!(h[2][2] > 1e4);
+    // Symmetric, and nothing matched on an empty map.
+    assert!((h[0][2] - h[2][0]).abs() < 1e-9 && (h[0][1] - h[1][0]).abs() < 1e-9);
+    let empty = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
+    assert_eq!(Matcher::default().information(&empty, &truth, &scan, &o), squall_core::covariance::ZERO);
+}

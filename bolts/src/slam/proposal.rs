@@ -1,0 +1,147 @@
+//! GMapping's improved proposal (Grisetti, Stachniss & Burgard 2007), in
+//! closed form: the scan's likelihood around the matched pose, as a
+//! Gaussian with the scan's information matrix, times the motion model's
+//! Gaussian around the odometry's prediction. A particle's new pose is
+//! drawn from the product, and its weight gains the product's integral.
+//!
+//! What this buys over taking the matched pose: along a direction the scan
+//! cannot pin down (a long corridor, open space), the information is near
+//! zero and the pose follows the odometry, not wherever the climb drifted;
+//! where both constrain, each counts by its certainty; and a match that
+//! strays far from the odometry, where the odometry is sure, weighs less.
+
+use rand::Rng;
+use squall_core::covariance::{Mat3, add, apply, cholesky, determinant, inverse, mul, quadratic};
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::random::standard_normal;
+
+/// Variance added to the motion's covariance so that it can be inverted
+/// when the robot has barely moved (m², rad²): a millimetre, a few
+/// hundredths of a degree.
+const MOTION_FLOOR: Real = 1e-6;
+
+/// A particle's draw from the proposal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Drawn {
+    /// The new pose.
+    pub pose: Pose2,
+    /// The log of the proposal's normaliser beyond the likelihood at the
+    /// matched pose: how well odometry and scan agree (≤ 0 up to the
+    /// determinant term).
+    pub log_agreement: Real,
+}
+
+/// Draws a pose from the product of the scan's Gaussian (mean `matched`,
+/// information `information`, world frame x, y, θ) and the motion's
+/// (mean `predicted`, covariance `motion`).
+pub(crate) fn draw<R: Rng + ?Sized>(
+    matched: &Pose2,
+    information: &Mat3,
+    predicted: &Pose2,
+    motion: &Mat3,
+    rng: &mut R,
+) -> Drawn {
+    let floor = [[MOTION_FLOOR, 0.0, 0.0], [0.0, MOTION_FLOOR, 0.0], [0.0, 0.0, MOTION_FLOOR]];
+    let motion = add(motion, &floor);
+    let prior = inverse(&motion).expect("a covariance plus a positive floor is invertible");
+    let posterior = inverse(&add(information, &prior)).expect("positive definite");
+    let offset =
+        [predicted.x - matched.x, predicted.y - matched.y, normalize_angle(predicted.theta - matched.theta)];
+    let shift = apply(&mul(&posterior, &prior), offset);
+    let l = cholesky(&posterior);
+    let e = [standard_normal(rng), standard_normal(rng), standard_normal(rng)];
+    let noise = apply(&l, e);
+    let pose = Pose2::new(
+        matched.x + shift[0] + noise[0],
+        matched.y + shift[1] + noise[1],
+        normalize_angle(matched.theta + shift[2] + noise[2]),
+    );
+    // ∫ exp(−½ (x − m)ᵀ H (x − m)) N(x; p, Σ) dx
+    //   = |I + ΣH|^(−½) exp(−½ dᵀ H (I + ΣH)⁻¹ d), d = p − m,
+    // which holds for a singular H (a direction the scan cannot see).
+    let coupled = add(&squall_core::covariance::IDENTITY, &mul(&motion, information));
+    let log_agreement = match inverse(&coupled) {
+        Some(inv) => -0.5 * determinant(&coupled).ln() - 0.5 * quadratic(&mul(information, &inv), offset),
+        None => 0.0,
+    };
+    Drawn { pose, log_agreement }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use squall_core::covariance::ZERO;
+
+    fn diag(a: Real, b: Real, c: Real) -> Mat3 {
+        [[a, 0.0, 0.0], [0.0, b, 0.0], [0.0, 0.0, c]]
+    }
+
+    fn draws(information: &Mat3, motion: &Mat3) -> (Vec<Drawn>, Pose2, Pose2) {
+        let matched = Pose2::new(1.0, 2.0, 0.3);
+        let predicted = Pose2::new(1.2, 1.9, 0.25);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        (
+            (0..20_000).map(|_| draw(&matched, information, &predicted, motion, &mut rng)).collect(),
+            matched,
+            predicted,
+        )
+    }
+
+    fn mean(d: &[Drawn], f: fn(&Pose2) -> Real) -> Real {
+        d.iter().map(|d| f(&d.pose)).sum::<Real>() / d.len() as Real
+    }
+
+    #[test]
+    fn where_the_scan_is_blind_the_pose_follows_the_odometry() {
+        // A corridor along x: the scan pins y and θ hard, x not at all.
+        let (d, matched, predicted) = draws(&diag(0.0, 1e6, 1e6), &diag(0.01, 0.01, 0.01));
+        assert!((mean(&d, |p| p.x) - predicted.x).abs() < 0.003, "{}", mean(&d, |p| p.x));
+        assert!((mean(&d, |p| p.y) - matched.y).abs() < 0.001);
+        assert!((mean(&d, |p| p.theta) - matched.theta).abs() < 0.001);
+        let sd_x =
+            (d.iter().map(|d| (d.pose.x - predicted.x).powi(2)).sum::<Real>() / d.len() as Real).sqrt();
+        assert!((sd_x - 0.1).abs() < 0.005, "the motion's spread along the corridor: {sd_x}");
+    }
+
+    #[test]
+    fn each_counts_by_its_certainty() {
+        // Equal certainty in x: the mean halfway; the spread 1/√2 of each.
+        let (d, matched, predicted) = draws(&diag(100.0, 100.0, 100.0), &diag(0.01, 0.01, 0.01));
+        let half = (matched.x + predicted.x) / 2.0;
+        assert!((mean(&d, |p| p.x) - half).abs() < 0.003, "{} vs {half}", mean(&d, |p| p.x));
+        let sd = (d.iter().map(|d| (d.pose.x - half).powi(2)).sum::<Real>() / d.len() as Real).sqrt();
+        assert!((sd - 0.1 / 2f64.sqrt()).abs() < 0.003, "{sd}");
+    }
+
+    #[test]
+    fn disagreement_where_both_are_sure_costs_weight() {
+        let sure = diag(1e4, 1e4, 1e4);
+        let agree = draw(
+            &Pose2::new(1.0, 2.0, 0.3),
+            &sure,
+            &Pose2::new(1.0, 2.0, 0.3),
+            &diag(1e-4, 1e-4, 1e-4),
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+        );
+        let apart = draw(
+            &Pose2::new(1.0, 2.0, 0.3),
+            &sure,
+            &Pose2::new(1.1, 2.0, 0.3),
+            &diag(1e-4, 1e-4, 1e-4),
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+        );
+        // d = 0.1 m with a combined variance of 2·10⁻⁴ m²: 25 nats.
+        assert!((agree.log_agreement - apart.log_agreement - 25.0).abs() < 0.5, "{agree:?} {apart:?}");
+        // A blind scan learns nothing: no cost, the motion's draw.
+        let blind = draw(
+            &Pose2::new(5.0, 5.0, 1.0),
+            &ZERO,
+            &Pose2::new(1.0, 2.0, 0.3),
+            &ZERO,
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+        );
+        assert_eq!(blind.log_agreement, 0.0);
+        assert!(blind.pose.distance(&Pose2::new(1.0, 2.0, 0.3)) < 0.01);
+    }
+}
