@@ -461,6 +461,19 @@ fn sim_odometry_quality_and_laser_flags_take_effect() {
     let clf = std::fs::read_to_string(narrow.join("sim.clf")).unwrap();
     assert!(clf.contains("PARAM laser_front_laser_angle_min -0.785398163"), "{clf:.400}");
     assert!(clf.contains("PARAM robot_front_laser_max 10.00"), "{clf:.400}");
+    // The campus has an 80 m laser and a faster robot unless told
+    // otherwise; the range flag still wins.
+    let campus = |dir: &std::path::Path, extra: &[&str]| -> String {
+        let mut args = vec!["sim", "--world", "campus", "--duration", "5", "--out", dir.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let out = squall(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::fs::read_to_string(dir.join("sim.clf")).unwrap()
+    };
+    let clf = campus(&dir.join("campus"), &[]);
+    assert!(clf.contains("PARAM robot_front_laser_max 80.00"), "{clf:.400}");
+    let clf = campus(&dir.join("campus30"), &["--range-max", "30"]);
+    assert!(clf.contains("PARAM robot_front_laser_max 30.00"), "{clf:.400}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
