@@ -121,4 +121,43 @@ impl TiledGrid {
             }
         }
     }
+
+    /// Calls `visit(mean x, mean y)` for every wall cell within `k` cells
+    /// of `centre` (at most 14), row by row from the lowest, each row
+    /// from the left: the wall cells around a hit, from which the scan's
+    /// information takes the wall's direction. Within one tile the walls
+    /// are found from the tile's bits; across tiles cell by cell.
+    #[inline]
+    pub fn wall_means_around(&self, centre: (i64, i64), k: i64, mut visit: impl FnMut(f32, f32)) {
+        debug_assert!((0..=14).contains(&k), "a window row fits in 32 bits");
+        let (lx, ly) = (centre.0 & TILE_MASK, centre.1 & TILE_MASK);
+        if lx < k || ly < k || lx + k > TILE_MASK || ly + k > TILE_MASK {
+            for y in centre.1 - k..=centre.1 + k {
+                for x in centre.0 - k..=centre.0 + k {
+                    let cell = self.get((x, y));
+                    if cell.is_wall(self.wall_threshold) {
+                        visit(cell.mean_x, cell.mean_y);
+                    }
+                }
+            }
+            return;
+        }
+        let Some(t) = self
+            .slot((centre.0 >> TILE_SHIFT, centre.1 >> TILE_SHIFT))
+            .and_then(|s| self.tiles[s].as_deref())
+        else {
+            return;
+        };
+        let width = (1u32 << (2 * k + 1)) - 1;
+        let x0 = (lx - k) as u32;
+        for y in (ly - k) as usize..=(ly + k) as usize {
+            let mut walls = (t.walls[y] >> x0) & width;
+            while walls != 0 {
+                let x = x0 as usize + walls.trailing_zeros() as usize;
+                walls &= walls - 1;
+                let [mx, my] = t.cells.means[y * TILE_SIDE + x];
+                visit(mx, my);
+            }
+        }
+    }
 }

@@ -147,7 +147,7 @@ fn integer_floor_matches_floor() {
 }
 
 #[test]
-fn kernel_search_matches_a_cell_by_cell_search() {
+fn kernel_search_and_wall_neighbours_match_a_cell_by_cell_search() {
     let mut g = TiledGrid::new(0.1, (0.0, 0.0)).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     // Cells over four tiles around the origin: walls, free cells and
@@ -191,6 +191,29 @@ fn kernel_search_matches_a_cell_by_cell_search() {
         }
     }
     assert!(matched > 10_000, "the data exercises matches: {matched}");
+
+    // The wall cells around a cell, in the same order, inside a tile and
+    // across tiles alike.
+    let mut visited = 0;
+    for _ in 0..2000 {
+        let c = (rng.random_range(-45..45), rng.random_range(-45..45));
+        for k in [0, 1, 2, 3] {
+            let mut got = Vec::new();
+            g.wall_means_around(c, k, |x, y| got.push((x, y)));
+            let mut want = Vec::new();
+            for y in c.1 - k..=c.1 + k {
+                for x in c.0 - k..=c.0 + k {
+                    let cell = g.get((x, y));
+                    if cell.visits > 0 && cell.hits as Real > 0.1 * cell.visits as Real {
+                        want.push((cell.mean_x, cell.mean_y));
+                    }
+                }
+            }
+            assert_eq!(got, want, "around {c:?}, k {k}");
+            visited += got.len();
+        }
+    }
+    assert!(visited > 1000, "the data has walls around: {visited}");
 }
 
 #[test]

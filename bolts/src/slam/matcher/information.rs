@@ -30,7 +30,6 @@ impl Matcher {
         let laser = pose.compose(&scan.laser_offset);
         directions(grid, scan, laser_heading(pose, scan), &mut self.turned);
         let per_variance = 1.0 / (o.delta * o.delta);
-        let threshold = grid.wall_threshold();
         let mut h = ZERO;
         for d in &self.turned.dirs {
             let end = (laser.x + d.dx, laser.y + d.dy);
@@ -45,7 +44,7 @@ impl Matcher {
             if best.0 == f32::INFINITY {
                 continue;
             }
-            let p = across_wall(grid, (Real::from(best.1.0), Real::from(best.1.1)), threshold);
+            let p = across_wall(grid, (Real::from(best.1.0), Real::from(best.1.1)));
             // ∂end/∂(x, y, θ) = [I | j] with j the end point's swing.
             let j = (-(end.1 - pose.y), end.0 - pose.x);
             let pj = (p[0][0] * j.0 + p[0][1] * j.1, p[1][0] * j.0 + p[1][1] * j.1);
@@ -70,26 +69,19 @@ const NEIGHBOURHOOD: i64 = 2;
 /// cells around it (its own included). Along a straight wall this is the
 /// projection onto the wall's normal; a blob or a corner gives a share of
 /// every direction; fewer than three hits, none.
-fn across_wall(grid: &TiledGrid, mean: (Real, Real), threshold: Real) -> [[Real; 2]; 2] {
+fn across_wall(grid: &TiledGrid, mean: (Real, Real)) -> [[Real; 2]; 2] {
     let centre = grid.cell_of(mean.0, mean.1);
     let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for dy in -NEIGHBOURHOOD..=NEIGHBOURHOOD {
-        for dx in -NEIGHBOURHOOD..=NEIGHBOURHOOD {
-            let cell = grid.get((centre.0 + dx, centre.1 + dy));
-            if !cell.is_wall(threshold) {
-                continue;
-            }
-            if let Some((x, y)) = cell.mean() {
-                let (x, y) = (x - mean.0, y - mean.1);
-                n += 1.0;
-                sx += x;
-                sy += y;
-                sxx += x * x;
-                sxy += x * y;
-                syy += y * y;
-            }
-        }
-    }
+    // A wall cell always has hits, so its mean.
+    grid.wall_means_around(centre, NEIGHBOURHOOD, |x, y| {
+        let (x, y) = (Real::from(x) - mean.0, Real::from(y) - mean.1);
+        n += 1.0;
+        sx += x;
+        sy += y;
+        sxx += x * x;
+        sxy += x * y;
+        syy += y * y;
+    });
     if n < 3.0 {
         // Too few hits to tell a wall's direction (a wall seen at a
         // grazing angle, a far post hit by one beam): claim nothing rather
