@@ -3,9 +3,61 @@
 
 use squall::bolts::slam::{filter::Rbpf, options::SlamOptions};
 use squall::core::eval::ground_truth;
+use squall::core::eval::relations::{Relation, parse_relations, score};
+use squall::core::sensor::LaserReading;
 use squall::core::trajectory::Trajectory;
 use squall::spouts::sim::office::office;
+use squall::spouts::sim::output::relations;
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation};
+
+/// A serial run's trajectories: the truth, the raw odometry and the
+/// final best lineage.
+struct Run {
+    truth: Trajectory,
+    odometry: Trajectory,
+    slam: Trajectory,
+}
+
+/// Runs the serial filter (`options`, seed `seed`) over every scan of
+/// `sim`, each scan first passed to `alter` with its event's index.
+fn run_lineage(
+    sim: Simulation,
+    options: SlamOptions,
+    seed: u64,
+    mut alter: impl FnMut(usize, &mut LaserReading),
+) -> Run {
+    let mut filter = Rbpf::new(options, seed).unwrap();
+    let (mut truth, mut odometry, mut scans) = (Trajectory::default(), Trajectory::default(), Vec::new());
+    for (k, event) in sim.enumerate() {
+        if let SimEvent::Scan(mut scan, true_pose) = event {
+            alter(k, &mut scan);
+            filter.process(&scan);
+            truth.push(scan.stamp, true_pose);
+            odometry.push(scan.stamp, scan.odometry);
+            scans.push((scan.stamp, scan.odometry));
+        }
+    }
+    let mut slam = Trajectory::default();
+    for (stamp, pose) in filter.lineage_poses(scans) {
+        slam.push(stamp, pose);
+    }
+    Run { truth, odometry, slam }
+}
+
+/// The simulator's relations of `truth`: (local, loop), each as many as
+/// the simulator counted.
+fn local_and_loop_relations(truth: &Trajectory) -> (Vec<Relation>, Vec<Relation>) {
+    let (text, local, loops) = relations(truth);
+    let lines = |skip: usize, take: usize| -> String {
+        text.lines().skip(skip).take(take).map(|l| format!("{l}\n")).collect()
+    };
+    let split = (
+        parse_relations("local", &lines(0, local)).unwrap(),
+        parse_relations("loops", &lines(local, usize::MAX)).unwrap(),
+    );
+    assert_eq!((split.0.len(), split.1.len()), (local, loops));
+    split
+}
 
 #[test]
 fn slam_beats_odometry_on_a_simulated_office() {
@@ -41,30 +93,12 @@ fn slam_beats_odometry_on_a_simulated_office() {
 /// best trajectory, which they cannot if the loop was not closed.
 #[test]
 fn a_simulated_run_closes_its_loops() {
-    use squall::core::eval::relations::{parse_relations, score};
-    use squall::spouts::sim::output::relations;
-
     let config = SimConfig { seed: 5, duration_secs: 300.0, ..SimConfig::default() };
     let sim = Simulation::new(office(3, 3, 2), config).unwrap();
     let options = SlamOptions { particles: 15, max_urange: 30.0, ..SlamOptions::default() };
-    let mut filter = Rbpf::new(options, 11).unwrap();
-    let (mut truth, mut odometry, mut scans) = (Trajectory::default(), Trajectory::default(), Vec::new());
-    for event in sim {
-        if let SimEvent::Scan(scan, true_pose) = event {
-            filter.process(&scan);
-            truth.push(scan.stamp, true_pose);
-            odometry.push(scan.stamp, scan.odometry);
-            scans.push((scan.stamp, scan.odometry));
-        }
-    }
-    let mut slam = Trajectory::default();
-    for (stamp, pose) in filter.lineage_poses(scans) {
-        slam.push(stamp, pose);
-    }
-    let (text, local, loops) = relations(&truth);
-    let loop_lines: String = text.lines().skip(local).map(|l| format!("{l}\n")).collect();
-    let loop_relations = parse_relations("loops", &loop_lines).unwrap();
-    assert_eq!(loop_relations.len(), loops);
+    let Run { truth, odometry, slam } = run_lineage(sim, options, 11, |_, _| ());
+    let (_, loop_relations) = local_and_loop_relations(&truth);
+    let loops = loop_relations.len();
     assert!(loops >= 5, "the route revisits places: {loops} loop relations");
     let (est, raw) = (score(&slam, &loop_relations), score(&odometry, &loop_relations));
     eprintln!("{loops} loop relations: SLAM {:.3} m, odometry {:.3} m", est.trans_mean, raw.trans_mean);
@@ -77,12 +111,11 @@ fn a_simulated_run_closes_its_loops() {
     );
 }
 
-/// The local error (relations 1 m apart, as the simulator writes them) of
-/// the serial filter's final lineage over a run, with `proposal`.
-fn campus_local_error(proposal: squall::bolts::slam::options::Proposal) -> (f64, f64) {
-    use squall::core::eval::relations::{parse_relations, score};
+/// The error over every relation (local and loop) of two minutes on the
+/// campus with good odometry, for SLAM's final lineage with `proposal`
+/// and for the raw odometry.
+fn campus_error(proposal: squall::bolts::slam::options::Proposal) -> (f64, f64) {
     use squall::spouts::sim::campus::campus;
-    use squall::spouts::sim::output::relations;
     use squall::spouts::sim::{OdometryQuality, laser_range_for, top_speed_for};
 
     let config = SimConfig {
@@ -95,23 +128,10 @@ fn campus_local_error(proposal: squall::bolts::slam::options::Proposal) -> (f64,
     };
     let sim = Simulation::new(campus(1).unwrap(), config).unwrap();
     let options = SlamOptions { particles: 10, proposal, ..SlamOptions::default() };
-    let mut filter = Rbpf::new(options, 3).unwrap();
-    let (mut truth, mut odometry, mut scans) = (Trajectory::default(), Trajectory::default(), Vec::new());
-    for event in sim {
-        if let SimEvent::Scan(scan, true_pose) = event {
-            filter.process(&scan);
-            truth.push(scan.stamp, true_pose);
-            odometry.push(scan.stamp, scan.odometry);
-            scans.push((scan.stamp, scan.odometry));
-        }
-    }
-    let mut slam = Trajectory::default();
-    for (stamp, pose) in filter.lineage_poses(scans) {
-        slam.push(stamp, pose);
-    }
-    let (text, _, _) = relations(&truth);
-    let relations = parse_relations("campus", &text).unwrap();
-    (score(&slam, &relations).trans_mean, score(&odometry, &relations).trans_mean)
+    let Run { truth, odometry, slam } = run_lineage(sim, options, 3, |_, _| ());
+    let (mut all, loops) = local_and_loop_relations(&truth);
+    all.extend(loops);
+    (score(&slam, &all).trans_mean, score(&odometry, &all).trans_mean)
 }
 
 /// On the open campus most beams meet nothing, and GMapping's proposal
@@ -121,8 +141,8 @@ fn campus_local_error(proposal: squall::bolts::slam::options::Proposal) -> (f64,
 #[test]
 fn on_the_open_campus_the_gaussian_proposal_keeps_closer_to_the_truth() {
     use squall::bolts::slam::options::Proposal;
-    let (gaussian, odometry) = campus_local_error(Proposal::Gaussian);
-    let (climb, _) = campus_local_error(Proposal::Climb);
+    let (gaussian, odometry) = campus_error(Proposal::Gaussian);
+    let (climb, _) = campus_error(Proposal::Climb);
     eprintln!(
         "campus, 120 s, good odometry: gaussian {gaussian:.4} m, climb {climb:.4} m, odometry {odometry:.4} m"
     );
@@ -137,34 +157,19 @@ fn on_the_open_campus_the_gaussian_proposal_keeps_closer_to_the_truth() {
 /// degree or two of the view.)
 #[test]
 fn scans_whose_start_angle_and_beam_count_vary_are_mapped_as_well() {
-    use squall::core::eval::relations::{parse_relations, score};
-    use squall::spouts::sim::output::relations;
     let local_error = |trim: bool| -> f64 {
         let config = SimConfig { seed: 3, duration_secs: 150.0, ..SimConfig::default() };
         let sim = Simulation::new(office(3, 3, 2), config).unwrap();
         let options = SlamOptions { particles: 10, max_urange: 30.0, ..SlamOptions::default() };
-        let mut filter = Rbpf::new(options, 7).unwrap();
-        let (mut truth, mut scans) = (Trajectory::default(), Vec::new());
-        for (k, event) in sim.enumerate() {
-            if let SimEvent::Scan(mut scan, true_pose) = event {
-                if trim {
-                    // 0–6 beams off the start, 0–4 off the end.
-                    let (start, end) = (k % 7, (k * 3) % 5);
-                    scan.ranges = scan.ranges[start..scan.ranges.len() - end].to_vec();
-                    scan.angle_min += start as f64 * scan.angle_increment;
-                }
-                filter.process(&scan);
-                truth.push(scan.stamp, true_pose);
-                scans.push((scan.stamp, scan.odometry));
+        let Run { truth, slam, .. } = run_lineage(sim, options, 7, |k, scan| {
+            if trim {
+                // 0–6 beams off the start, 0–4 off the end.
+                let (start, end) = (k % 7, (k * 3) % 5);
+                scan.ranges = scan.ranges[start..scan.ranges.len() - end].to_vec();
+                scan.angle_min += start as f64 * scan.angle_increment;
             }
-        }
-        let mut slam = Trajectory::default();
-        for (stamp, pose) in filter.lineage_poses(scans) {
-            slam.push(stamp, pose);
-        }
-        let (text, local, _) = relations(&truth);
-        let local_lines: String = text.lines().take(local).map(|l| format!("{l}\n")).collect();
-        score(&slam, &parse_relations("local", &local_lines).unwrap()).trans_mean
+        });
+        score(&slam, &local_and_loop_relations(&truth).0).trans_mean
     };
     let (whole, trimmed) = (local_error(false), local_error(true));
     eprintln!("local relation error: fixed scans {whole:.4} m, varying scans {trimmed:.4} m");

@@ -11,7 +11,7 @@
 //! strays far from the odometry, where the odometry is sure, weighs less.
 
 use rand::Rng;
-use squall_core::covariance::{Mat3, add, apply, cholesky, determinant, inverse, mul, quadratic};
+use squall_core::covariance::{IDENTITY, Mat3, add, apply, cholesky, determinant, inverse, mul, quadratic};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 use squall_core::random::standard_normal;
 
@@ -59,7 +59,7 @@ pub(crate) fn draw<R: Rng + ?Sized>(
     // ∫ exp(−½ (x − m)ᵀ H (x − m)) N(x; p, Σ) dx
     //   = |I + ΣH|^(−½) exp(−½ dᵀ H (I + ΣH)⁻¹ d), d = p − m,
     // which holds for a singular H (a direction the scan cannot see).
-    let coupled = add(&squall_core::covariance::IDENTITY, &mul(&motion, information));
+    let coupled = add(&IDENTITY, &mul(&motion, information));
     let log_agreement = match inverse(&coupled) {
         Some(inv) => -0.5 * determinant(&coupled).ln() - 0.5 * quadratic(&mul(information, &inv), offset),
         None => 0.0,
@@ -114,34 +114,22 @@ mod tests {
         assert!((sd - 0.1 / 2f64.sqrt()).abs() < 0.003, "{sd}");
     }
 
+    /// One draw with matched pose (1, 2, 0.3) and a fixed stream.
+    fn draw_once(information: &Mat3, predicted: &Pose2, motion: &Mat3) -> Drawn {
+        let matched = Pose2::new(1.0, 2.0, 0.3);
+        draw(&matched, information, predicted, motion, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1))
+    }
+
     #[test]
     fn disagreement_where_both_are_sure_costs_weight() {
-        let sure = diag(1e4, 1e4, 1e4);
-        let agree = draw(
-            &Pose2::new(1.0, 2.0, 0.3),
-            &sure,
-            &Pose2::new(1.0, 2.0, 0.3),
-            &diag(1e-4, 1e-4, 1e-4),
-            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
-        );
-        let apart = draw(
-            &Pose2::new(1.0, 2.0, 0.3),
-            &sure,
-            &Pose2::new(1.1, 2.0, 0.3),
-            &diag(1e-4, 1e-4, 1e-4),
-            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
-        );
+        let (sure, tight) = (diag(1e4, 1e4, 1e4), diag(1e-4, 1e-4, 1e-4));
+        let agree = draw_once(&sure, &Pose2::new(1.0, 2.0, 0.3), &tight);
+        let apart = draw_once(&sure, &Pose2::new(1.1, 2.0, 0.3), &tight);
         // d = 0.1 m with a combined variance of 2·10⁻⁴ m²: 25 nats.
         assert!((agree.log_agreement - apart.log_agreement - 25.0).abs() < 0.5, "{agree:?} {apart:?}");
         // A blind scan learns nothing: no cost, the motion's draw.
-        let blind = draw(
-            &Pose2::new(5.0, 5.0, 1.0),
-            &ZERO,
-            &Pose2::new(1.0, 2.0, 0.3),
-            &ZERO,
-            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
-        );
+        let blind = draw_once(&ZERO, &Pose2::new(5.0, 5.0, 1.0), &ZERO);
         assert_eq!(blind.log_agreement, 0.0);
-        assert!(blind.pose.distance(&Pose2::new(1.0, 2.0, 0.3)) < 0.01);
+        assert!(blind.pose.distance(&Pose2::new(5.0, 5.0, 1.0)) < 0.01);
     }
 }

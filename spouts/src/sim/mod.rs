@@ -29,7 +29,7 @@ pub const CAMPUS_WORLD: &str = "campus";
 /// The laser range a world is simulated with unless told otherwise,
 /// metres: 80 on the open campus, 30 indoors.
 pub fn laser_range_for(world: &str) -> f64 {
-    if world == CAMPUS_WORLD { campus::CAMPUS_RANGE } else { 30.0 }
+    if world == CAMPUS_WORLD { campus::CAMPUS_RANGE } else { SimConfig::default().range_max }
 }
 
 /// The robot's top speed in a world, m/s: 1.5 on the open campus (so

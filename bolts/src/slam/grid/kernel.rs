@@ -59,13 +59,7 @@ impl TiledGrid {
                 continue;
             }
             let free = (t.free[(y as i64 + back.1) as usize] >> bx) & width;
-            let mut candidates = walls & free;
-            while candidates != 0 {
-                let x = x0 as usize + candidates.trailing_zeros() as usize;
-                candidates &= candidates - 1;
-                let [mx, my] = t.cells.means[y * TILE_SIDE + x];
-                visit(mx, my);
-            }
+            visit_row_means(t, y, x0 as usize, walls & free, &mut visit);
         }
     }
 
@@ -151,13 +145,19 @@ impl TiledGrid {
         let width = (1u32 << (2 * k + 1)) - 1;
         let x0 = (lx - k) as u32;
         for y in (ly - k) as usize..=(ly + k) as usize {
-            let mut walls = (t.walls[y] >> x0) & width;
-            while walls != 0 {
-                let x = x0 as usize + walls.trailing_zeros() as usize;
-                walls &= walls - 1;
-                let [mx, my] = t.cells.means[y * TILE_SIDE + x];
-                visit(mx, my);
-            }
+            visit_row_means(t, y, x0 as usize, (t.walls[y] >> x0) & width, &mut visit);
         }
+    }
+}
+
+/// Calls `visit(mean x, mean y)` for each cell of row `y` of `t` whose bit
+/// is set in `bits` (bit i: column `x0 + i`), from the left.
+#[inline(always)]
+fn visit_row_means(t: &Tile, y: usize, x0: usize, mut bits: u32, visit: &mut impl FnMut(f32, f32)) {
+    while bits != 0 {
+        let x = x0 + bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let [mx, my] = t.cells.means[y * TILE_SIDE + x];
+        visit(mx, my);
     }
 }
