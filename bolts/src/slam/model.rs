@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::pf::trajectory::{BetweenScans, NoiseWeights};
-use crate::slam::grid::{TILE_BYTES, TiledGrid};
+use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::old_map::{MapHistory, search_old_map};
@@ -47,12 +47,12 @@ impl SlamParticle {
     /// Bytes of the distinct tiles of its grids.
     pub fn memory(&self) -> usize {
         let MapHistory { recent, old, .. } = &self.history;
-        let recent_beyond = recent.as_ref().map_or(0, |r| r.tiles_beyond(&[&self.map]));
+        let recent_beyond = recent.as_ref().map_or(0, |r| r.bytes_beyond(&[&self.map]));
         let old_beyond = old.as_ref().map_or(0, |o| match recent {
-            Some(r) => o.tiles_beyond(&[&self.map, r]),
-            None => o.tiles_beyond(&[&self.map]),
+            Some(r) => o.bytes_beyond(&[&self.map, r]),
+            None => o.bytes_beyond(&[&self.map]),
         });
-        (self.map.tile_count() + recent_beyond + old_beyond) * TILE_BYTES
+        self.map.bytes() + recent_beyond + old_beyond
     }
 }
 

@@ -108,8 +108,7 @@ impl TiledGrid {
                 let x = c.0 - k + i64::from(candidates.trailing_zeros());
                 candidates &= candidates - 1;
                 if let Some(t) = tile_of(x, y) {
-                    let [mx, my] =
-                        t.cells.means[((y & TILE_MASK) as usize) * TILE_SIDE + (x & TILE_MASK) as usize];
+                    let [mx, my] = t.wall_mean((x & TILE_MASK) as usize, (y & TILE_MASK) as usize);
                     visit(mx, my);
                 }
             }
@@ -157,7 +156,7 @@ fn visit_row_means(t: &Tile, y: usize, x0: usize, mut bits: u32, visit: &mut imp
     while bits != 0 {
         let x = x0 + bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        let [mx, my] = t.cells.means[y * TILE_SIDE + x];
+        let [mx, my] = t.wall_mean(x, y);
         visit(mx, my);
     }
 }

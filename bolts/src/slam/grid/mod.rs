@@ -27,7 +27,7 @@ use squall_core::geometry::{Real, round_small};
 pub(crate) use cell::Cell;
 pub use cell::DEFAULT_WALL_THRESHOLD;
 use tile::TILE_MASK;
-pub(crate) use tile::{TILE_BYTES, TILE_SHIFT, TILE_SIDE, Tile};
+pub(crate) use tile::{TILE_SHIFT, TILE_SIDE, Tile};
 pub(crate) use wire::GridWire;
 pub use wire::GridWireError;
 

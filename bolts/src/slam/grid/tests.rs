@@ -38,8 +38,8 @@ fn a_grid_survives_the_wire_and_a_damaged_one_is_refused() {
     let mut poisoned = wire();
     let tile = poisoned.tiles.iter_mut().flatten().find(|t| t.cells.iter().any(|c| c.hits > 0)).unwrap();
     let cells = &mut Arc::make_mut(tile).cells;
-    let i = cells.counts.iter().position(|c| c.hits > 0).unwrap();
-    cells.means[i][0] = f32::INFINITY;
+    let i = cells.iter().position(|c| c.hits > 0).unwrap();
+    cells.set(i, Cell { mean_x: f32::INFINITY, ..cells.get(i) });
     assert!(refused(poisoned).contains("not finite"));
     // Damaged bytes: an error or a valid grid, never a panic.
     let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -115,11 +115,11 @@ fn copies_share_tiles_until_written() {
     b.update((6, 0), |c| c.hits += 1);
     assert_eq!(b.take_clone_count(), 0, "the clone is now b's own");
     assert_eq!(TiledGrid::distinct_tiles([&a, &b]).0, 5);
-    assert_eq!((b.tiles_beyond(&[&a]), a.tiles_beyond(&[&b]), b.tiles_beyond(&[])), (1, 1, 4));
-    assert_eq!(a.tiles_beyond(&[&b, &a]), 0);
+    assert_eq!((b.count_beyond(&[&a]), a.count_beyond(&[&b]), b.count_beyond(&[])), (1, 1, 4));
+    assert_eq!(a.count_beyond(&[&b, &a]), 0);
     // Shared tiles are found by place even after an index grew.
     b.update((-500, 300), |c| c.hits += 1);
-    assert_eq!((b.tiles_beyond(&[&a]), a.tiles_beyond(&[&b])), (2, 1));
+    assert_eq!((b.count_beyond(&[&a]), a.count_beyond(&[&b])), (2, 1));
     assert_eq!(a.get((5, 0)).hits, 0, "the original is untouched");
     assert_eq!(b.get((5, 0)).hits, 1);
 }
@@ -309,4 +309,43 @@ fn occupancy_and_mean_hit() {
     assert_eq!(c.occupancy(), Some(0.75));
     assert_eq!(c.mean(), Some((1.0, 3.0)));
     assert_eq!(Cell::default().occupancy(), None);
+}
+
+#[test]
+fn cells_hit_in_any_order_read_back_as_written() {
+    // Tiles keep hit cells apart from the rest, in row-major order: hits
+    // that arrive out of order insert into the middle of that list, and
+    // every cell must still read back as a plain cell-by-cell map holds it.
+    let mut rng = ChaCha8Rng::seed_from_u64(29);
+    let mut g = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
+    let mut expected = std::collections::HashMap::<(i64, i64), Cell>::new();
+    for _ in 0..6000 {
+        let c = (rng.random_range(-40..40), rng.random_range(-40..40));
+        let reference = expected.entry(c).or_default();
+        if rng.random_bool(0.3) {
+            let (x, y) = (rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0));
+            g.update(c, |cell| cell.add_hit(x, y));
+            reference.add_hit(x, y);
+        } else {
+            g.add_beam(c, (c.0 + 1, c.1), None);
+            reference.visits += 1;
+        }
+    }
+    let copy = g.clone();
+    let back: TiledGrid = postcard::from_bytes(&postcard::to_stdvec(&g).unwrap()).unwrap();
+    for y in -42..42 {
+        for x in -42..42 {
+            let want = expected.get(&(x, y)).copied().unwrap_or_default();
+            assert_eq!(g.get((x, y)), want, "({x}, {y})");
+            assert_eq!(back.get((x, y)), want, "({x}, {y}) from the wire");
+        }
+    }
+    let walls = |g: &TiledGrid| {
+        let mut means = Vec::new();
+        g.wall_means_around((5, 5), 14, |mx, my| means.push((mx, my)));
+        means
+    };
+    assert!(walls(&g).len() > 20);
+    assert_eq!(walls(&copy), walls(&g));
+    assert!(g.bytes() < g.tile_count() * (std::mem::size_of::<Cell>() * TILE_SIDE * TILE_SIDE) / 3);
 }

@@ -35,7 +35,7 @@ impl TryFrom<TileWire> for Tile {
         if n != TILE_SIDE * TILE_SIDE {
             return Err(GridWireError::TileCells { expected: TILE_SIDE * TILE_SIDE, got: n });
         }
-        let mut cells = Box::<Cells>::default();
+        let mut cells = Cells::default();
         for (i, &c) in w.cells.iter().enumerate() {
             if c.visits > MAX_VISITS || c.hits > c.visits {
                 let (x, y) = (i % TILE_SIDE, i / TILE_SIDE);
@@ -49,6 +49,7 @@ impl TryFrom<TileWire> for Tile {
             }
             cells.set(i, c);
         }
+        cells.shrink_to_fit();
         let rows = |v: Vec<u32>| -> Result<[u32; TILE_SIDE], GridWireError> {
             let n = v.len();
             v.try_into().map_err(|_| GridWireError::BitRows { expected: TILE_SIDE, got: n })
