@@ -245,9 +245,18 @@ fn simulated_worlds_are_studied_per_odometry_quality_with_their_relations() {
         let row = rows.iter().find(|r| r[0].contains(log)).unwrap();
         row[odometry].parse().unwrap()
     };
-    let ate = column("ate_m");
+    let (ate, rss, seed) = (column("ate_m"), column("peak_rss_mb"), column("seed"));
     for row in &rows[1..] {
         assert_eq!(row[status], "ok", "{row:?}");
+        // Each run's memory is its own, as its metrics.json reports it, not
+        // the study's (which generated the worlds) carried into the child.
+        let name = Path::new(&row[0]).file_stem().unwrap().to_string_lossy().into_owned();
+        let metrics = dir.path().join(format!("D/runs/{name}-s{}/metrics.json", row[seed]));
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&metrics).unwrap()).unwrap();
+        let own = metrics["peak_rss_mb"].as_f64().expect("the run reports its peak memory");
+        let reported: f64 = row[rss].parse().unwrap();
+        assert!(own > 1.0 && (reported - own).abs() < 0.06, "{reported} against {own}: {row:?}");
         let e: f64 = row[error].parse().unwrap();
         assert!(e.is_finite() && e < 0.1, "{row:?}");
         // Against the world's ground truth: SLAM keeps to a few centimetres.

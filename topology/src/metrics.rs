@@ -245,6 +245,13 @@ pub struct RunReport {
     pub seed: u64,
     /// Wall time of the run.
     pub wall_secs: f64,
+    /// Peak resident memory of this process when the report was made,
+    /// MiB (Linux's `VmHWM`; absent where the system does not report it).
+    /// In cluster mode, the coordinator's process only. A parent's own
+    /// memory does not count here, unlike in the `ru_maxrss` a parent
+    /// reads when it reaps the process.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_rss_mb: Option<f64>,
     /// Components in file order.
     pub components: Vec<ComponentReport>,
     /// Things the user should know (undelivered tuples, abandoned trees).
@@ -353,6 +360,15 @@ pub(crate) fn component_report(
         custom: summarize_custom(&custom),
         per_task,
     }
+}
+
+/// This process's peak resident memory, MiB, from `/proc/self/status`
+/// (`None` where there is no such file or line).
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    let kib: f64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 impl RunReport {

@@ -14,7 +14,9 @@ pub(crate) mod modes;
 pub mod population;
 pub mod resample;
 pub mod shard;
+pub mod smoother;
 pub(crate) mod trajectory;
 
 pub use filter::{Filter, StepReport};
 pub use model::{Correction, ParticleModel};
+pub use trajectory::{BetweenScans, NoiseWeights, TrajectoryOutput};

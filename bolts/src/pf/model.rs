@@ -5,7 +5,7 @@
 use rand_chacha::ChaCha8Rng;
 
 use crate::pf::resample::Scheme;
-use crate::pf::trajectory::{BetweenScans, NoiseWeights};
+use crate::pf::trajectory::{BetweenScans, NoiseWeights, Smoother, TrajectoryOutput};
 use squall_core::geometry::{Pose2, Real};
 
 /// The model-specific parts of a particle filter.
@@ -115,9 +115,15 @@ pub trait ParticleModel: Send + Sync + 'static {
         let _ = (state, reading, rng);
     }
 
-    /// How the trajectory fills in readings between corrections.
-    fn between_readings(&self) -> (BetweenScans, NoiseWeights) {
-        (BetweenScans::Odometry, NoiseWeights { per_metre: 0.0, per_radian: 0.0 })
+    /// How the written trajectory is made from the best lineage. The
+    /// default writes the corrected poses as they are and composes them
+    /// with odometry in between.
+    fn trajectory_output(&self) -> TrajectoryOutput {
+        TrajectoryOutput {
+            between: BetweenScans::Odometry,
+            noise: NoiseWeights { per_metre: 0.0, per_radian: 0.0 },
+            smoother: Smoother::None,
+        }
     }
 }
 

@@ -12,6 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 
+pub use super::smoother::Smoother;
+use super::smoother::smooth;
+
 /// How poses between processed scans are filled in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -23,6 +26,18 @@ pub enum BetweenScans {
     /// The last corrected pose composed with the odometry since (what
     /// GMapping reports): a jump at each processed scan.
     Odometry,
+}
+
+/// How the written trajectory is made from the best lineage: smoothed,
+/// then filled in between processed scans.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TrajectoryOutput {
+    /// How poses between processed scans are filled in.
+    pub between: BetweenScans,
+    /// Odometry noise weights for that filling.
+    pub noise: NoiseWeights,
+    /// What is done to the processed scans' poses first.
+    pub smoother: Smoother,
 }
 
 /// A processed scan: (stamp, corrected pose, odometry at that scan).
@@ -39,15 +54,17 @@ pub struct NoiseWeights {
 }
 
 /// A pose for each of `scans` (stamp, odometry), in order, from the
-/// processed scans `corrected` (oldest first, stamps among the scans').
+/// processed scans `corrected` (oldest first, stamps among the scans'),
+/// smoothed and filled in as `output` says.
 /// Scans before the first processed scan get no pose (the filter had
 /// none), so the output may be shorter than the input.
 pub(crate) fn fill(
     corrected: &[Corrected],
     scans: &[(f64, Pose2)],
-    mode: BetweenScans,
-    noise: NoiseWeights,
+    output: TrajectoryOutput,
 ) -> Vec<(f64, Pose2)> {
+    let corrected = &smooth(corrected, output.smoother)[..];
+    let TrajectoryOutput { between: mode, noise, .. } = output;
     let along = expected_noise_along(scans, noise);
     let mut out = Vec::with_capacity(scans.len());
     let mut k = 0;
@@ -111,6 +128,11 @@ mod tests {
 
     const NOISE: NoiseWeights = NoiseWeights { per_metre: 0.1, per_radian: 0.1 };
 
+    /// Filling as `between` says, without smoothing.
+    fn output(between: BetweenScans) -> TrajectoryOutput {
+        TrajectoryOutput { between, noise: NOISE, smoother: Smoother::None }
+    }
+
     /// Odometry that drives straight along x, 0.1 m per scan, while the
     /// truth drives 0.11 m per scan: processed at scans 0 and 10.
     fn drifting() -> (Vec<Corrected>, Vec<(f64, Pose2)>) {
@@ -124,7 +146,7 @@ mod tests {
     #[test]
     fn interpolation_spreads_the_correction_over_the_scans_before_it() {
         let (corrected, scans) = drifting();
-        let poses = fill(&corrected, &scans, BetweenScans::Interpolate, NOISE);
+        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate));
         assert_eq!(poses.len(), scans.len());
         for (i, (stamp, p)) in poses.iter().enumerate().take(11) {
             assert_eq!(*stamp, i as f64);
@@ -137,7 +159,7 @@ mod tests {
     #[test]
     fn odometry_mode_jumps_at_the_processed_scan() {
         let (corrected, scans) = drifting();
-        let poses = fill(&corrected, &scans, BetweenScans::Odometry, NOISE);
+        let poses = fill(&corrected, &scans, output(BetweenScans::Odometry));
         assert!((poses[9].1.x - 0.9).abs() < 1e-12);
         assert!((poses[10].1.x - 1.1).abs() < 1e-12);
     }
@@ -153,7 +175,7 @@ mod tests {
         ];
         let end = Pose2::new(scans[2].1.x, scans[2].1.y + 0.2, 1.0);
         let corrected = vec![(0.0, Pose2::IDENTITY, scans[0].1), (2.0, end, scans[2].1)];
-        let poses = fill(&corrected, &scans, BetweenScans::Interpolate, NOISE);
+        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate));
         let backward = end.compose(&scans[1].1.relative_to(&scans[2].1));
         let expected = blend(&scans[1].1, &backward, 0.5);
         assert!((poses[1].1.y - expected.y).abs() < 1e-12 && (poses[1].1.y - 0.1).abs() < 1e-12);
@@ -163,8 +185,8 @@ mod tests {
     fn scans_before_the_first_processed_one_get_no_pose() {
         let (mut corrected, scans) = drifting();
         corrected.remove(0);
-        let poses = fill(&corrected, &scans, BetweenScans::Interpolate, NOISE);
+        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate));
         assert_eq!(poses.first().map(|p| p.0), Some(10.0));
-        assert!(fill(&[], &scans, BetweenScans::Interpolate, NOISE).is_empty());
+        assert!(fill(&[], &scans, output(BetweenScans::Interpolate)).is_empty());
     }
 }

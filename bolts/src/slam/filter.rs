@@ -73,8 +73,7 @@ impl Rbpf {
     pub fn lineage_poses(&self, scans: impl IntoIterator<Item = (f64, Pose2)>) -> Vec<(f64, Pose2)> {
         let Some(population) = self.filter.population() else { return Vec::new() };
         let scans: Vec<(f64, Pose2)> = scans.into_iter().collect();
-        let (between, noise) = self.filter.model().between_readings();
-        trajectory::fill(&population.best_trajectory(), &scans, between, noise)
+        trajectory::fill(&population.best_trajectory(), &scans, self.filter.model().trajectory_output())
     }
 }
 

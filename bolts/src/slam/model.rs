@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
-use crate::pf::trajectory::{BetweenScans, NoiseWeights};
+use crate::pf::trajectory::{NoiseWeights, TrajectoryOutput};
 use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
@@ -23,8 +23,17 @@ use squall_core::sensor::LaserReading;
 /// way (tiles shared with relatives until written).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SlamParticle {
-    /// Current pose.
+    /// Current pose: the particle's sample of the robot's path ends here,
+    /// and its map is built from it.
     pub pose: Pose2,
+    /// The pose the particle reports: the proposal's mean at the last
+    /// correction (the prediction's since). The sample `pose` carries the
+    /// proposal's noise, which keeps relatives apart; the mean is the
+    /// better estimate of where the robot is given the particle's map (a
+    /// Rao-Blackwellized estimate: along a corridor it is the odometry's
+    /// prediction, not one draw around it). Equal to `pose` with
+    /// GMapping's proposal.
+    pub estimate: Pose2,
     /// The particle's map.
     pub map: TiledGrid,
     /// Snapshots of the map for the old-map search.
@@ -118,7 +127,8 @@ impl ParticleModel for SlamModel {
             .expect("SlamModel::new checked delta > 0 and occupied_threshold in [0, 1)");
         integrate_scan(&mut map, &first.odometry, first, o.max_urange);
         map.take_clone_count();
-        SlamParticle { pose: first.odometry, map, history: MapHistory::default(), motion: ZERO, noisy: None }
+        let pose = first.odometry;
+        SlamParticle { pose, estimate: pose, map, history: MapHistory::default(), motion: ZERO, noisy: None }
     }
 
     fn mark(&self, input: &LaserReading) -> (f64, Pose2) {
@@ -153,6 +163,7 @@ impl ParticleModel for SlamModel {
                 propagate_motion(&p.pose, &mut p.motion, &step.from, &step.to, &noise)
             }
         };
+        p.estimate = p.pose;
     }
 
     fn prepare(&self, input: &LaserReading, scratch: &mut SlamScratch) {
@@ -177,12 +188,14 @@ impl ParticleModel for SlamModel {
             Proposal::Climb => {
                 // A climb that matched nothing leaves the pose where it was.
                 p.pose = m.pose;
+                p.estimate = m.pose;
                 Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations, fit }
             }
             Proposal::Gaussian => {
                 let information = matcher.information(&p.map, &m.pose, prepared, o);
                 let drawn = draw(&m.pose, &information, &p.pose, &p.motion, rng);
                 p.pose = drawn.pose;
+                p.estimate = drawn.mean;
                 p.motion = ZERO;
                 let log_likelihood = m.log_likelihood + drawn.log_agreement;
                 Correction { log_likelihood, evaluations: m.evaluations, fit }
@@ -197,7 +210,7 @@ impl ParticleModel for SlamModel {
     }
 
     fn pose(&self, p: &SlamParticle) -> Pose2 {
-        p.pose
+        p.estimate
     }
 
     fn state_bytes(&self, p: &SlamParticle) -> u64 {
@@ -216,8 +229,12 @@ impl ParticleModel for SlamModel {
         self.options.resampling
     }
 
-    fn between_readings(&self) -> (BetweenScans, NoiseWeights) {
+    fn trajectory_output(&self) -> TrajectoryOutput {
         let o = &self.options;
-        (o.between_scans, NoiseWeights { per_metre: o.srr, per_radian: o.str })
+        TrajectoryOutput {
+            between: o.between_scans,
+            noise: NoiseWeights { per_metre: o.srr, per_radian: o.str },
+            smoother: o.smoother,
+        }
     }
 }

@@ -25,6 +25,8 @@ const MOTION_FLOOR: Real = 1e-6;
 pub(crate) struct Drawn {
     /// The new pose.
     pub pose: Pose2,
+    /// The proposal's mean.
+    pub mean: Pose2,
     /// The log of the proposal's normaliser beyond the likelihood at the
     /// matched pose: how well odometry and scan agree (≤ 0 up to the
     /// determinant term).
@@ -56,6 +58,8 @@ pub(crate) fn draw<R: Rng + ?Sized>(
         matched.y + shift[1] + noise[1],
         normalize_angle(matched.theta + shift[2] + noise[2]),
     );
+    let mean =
+        Pose2::new(matched.x + shift[0], matched.y + shift[1], normalize_angle(matched.theta + shift[2]));
     // ∫ exp(−½ (x − m)ᵀ H (x − m)) N(x; p, Σ) dx
     //   = |I + ΣH|^(−½) exp(−½ dᵀ H (I + ΣH)⁻¹ d), d = p − m,
     // which holds for a singular H (a direction the scan cannot see).
@@ -64,7 +68,7 @@ pub(crate) fn draw<R: Rng + ?Sized>(
         Some(inv) => -0.5 * determinant(&coupled).ln() - 0.5 * quadratic(&mul(information, &inv), offset),
         None => 0.0,
     };
-    Drawn { pose, log_agreement }
+    Drawn { pose, mean, log_agreement }
 }
 
 #[cfg(test)]

@@ -32,6 +32,7 @@ struct PackedTransfer {
 struct PackedParticle {
     slot: u32,
     pose: Pose2,
+    estimate: Pose2,
     map: PackedGrid,
     updates: u64,
     recent: Option<PackedGrid>,
@@ -48,6 +49,7 @@ impl PackedParticle {
         PackedParticle {
             slot,
             pose: p.pose,
+            estimate: p.estimate,
             map,
             updates: p.history.updates,
             recent,
@@ -64,7 +66,14 @@ impl PackedParticle {
         let history = MapHistory { updates: self.updates, recent, old };
         Ok((
             self.slot,
-            SlamParticle { pose: self.pose, map, history, motion: self.motion, noisy: self.noisy },
+            SlamParticle {
+                pose: self.pose,
+                estimate: self.estimate,
+                map,
+                history,
+                motion: self.motion,
+                noisy: self.noisy,
+            },
         ))
     }
 }
@@ -102,7 +111,8 @@ mod tests {
         }
         let motion = [[0.01, 0.0, 0.001], [0.0, 0.02, 0.0], [0.001, 0.0, 0.003]];
         let noisy = Some(Pose2::new(x + 0.1, 0.05, 0.12));
-        SlamParticle { pose: Pose2::new(x, 0.0, 0.1), map, history: MapHistory::default(), motion, noisy }
+        let (pose, estimate) = (Pose2::new(x, 0.0, 0.1), Pose2::new(x, 0.01, 0.1));
+        SlamParticle { pose, estimate, map, history: MapHistory::default(), motion, noisy }
     }
 
     #[test]
@@ -115,7 +125,7 @@ mod tests {
         let back = Transfer::<SlamParticle, LaserReading>::decode_incremental(&bytes, &mut held).unwrap();
         assert_eq!(back.step, 3);
         assert_eq!(back.states.iter().map(|s| s.0).collect::<Vec<_>>(), vec![0, 5]);
-        assert_eq!(back.states[1].1.pose, parent.pose);
+        assert_eq!((back.states[1].1.pose, back.states[1].1.estimate), (parent.pose, parent.estimate));
         assert_eq!((back.states[1].1.motion, back.states[1].1.noisy), (parent.motion, parent.noisy));
         assert_eq!(back.states[1].1.map.get((7, 10)), parent.map.get((7, 10)));
         let plain = postcard::to_stdvec(&first).unwrap().len();

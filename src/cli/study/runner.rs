@@ -1,7 +1,11 @@
 //! One run as its own process: `squall slam` started from this binary,
 //! its stdout and stderr to files in its folder, waited on with `wait4`
 //! to read the child's own resource usage (CPU time and peak memory),
-//! which `Child::wait` does not give.
+//! which `Child::wait` does not give. The child's peak memory is the one
+//! its `metrics.json` reports when there is one: Linux's `ru_maxrss` of a
+//! child also counts the parent's memory as it was when the child
+//! started, which a study that generated worlds in its own process would
+//! add to every run.
 
 use std::ffi::OsString;
 use std::fs::File;
@@ -29,7 +33,8 @@ pub(super) struct Measured {
     pub(super) wall_secs: f64,
     /// User plus system time of the child.
     pub(super) cpu_secs: f64,
-    /// Peak resident set size of the child, MiB.
+    /// Peak resident set size of the child, MiB: as its `metrics.json`
+    /// reports it, else its `ru_maxrss`.
     pub(super) peak_rss_mb: f64,
     /// Why the run failed (its last stderr line), `None` when it exited 0.
     pub(super) failure: Option<String>,
@@ -70,9 +75,15 @@ pub(super) fn run(job: &Job) -> Result<Measured, String> {
         wall_secs,
         cpu_secs: secs(usage.ru_utime) + secs(usage.ru_stime),
         // Linux reports ru_maxrss in KiB.
-        peak_rss_mb: usage.ru_maxrss as f64 / 1024.0,
+        peak_rss_mb: reported_peak_rss_mb(&job.dir).unwrap_or(usage.ru_maxrss as f64 / 1024.0),
         failure,
     })
+}
+
+/// The peak memory the run's `metrics.json` in `dir` reports, MiB.
+fn reported_peak_rss_mb(dir: &std::path::Path) -> Option<f64> {
+    let text = std::fs::read_to_string(dir.join("metrics.json")).ok()?;
+    serde_json::from_str::<serde_json::Value>(&text).ok()?.get("peak_rss_mb")?.as_f64()
 }
 
 /// Reaps `child` with `wait4`, returning its exit status and its own

@@ -77,6 +77,7 @@ pub(crate) fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], w
         topology: topology.spec.name.clone(),
         seed: topology.spec.seed,
         wall_secs: wall.as_secs_f64(),
+        peak_rss_mb: crate::metrics::peak_rss_mb(),
         components,
         warnings,
         edges: Vec::new(),

@@ -207,14 +207,12 @@ impl<M: HostedModel> Matcher<M> {
     }
 
     fn settings(&self) -> Settings {
-        let (between, noise) = self.model.between_readings();
         Settings {
             smoothing: self.model.weight_smoothing(),
             threshold: self.model.resample_threshold(),
             scheme: self.model.resampling(),
             injection: self.model.injection(),
-            between,
-            noise,
+            trajectory: self.model.trajectory_output(),
         }
     }
 

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::pf::shard::SlotReport;
-use crate::pf::trajectory::{BetweenScans, NoiseWeights};
+use crate::pf::trajectory::TrajectoryOutput;
 use squall_core::geometry::{Pose2, Real};
 
 /// Dispatcher → every matcher task: a reading and its number in the run
@@ -42,10 +42,8 @@ pub struct Settings {
     pub scheme: Scheme,
     /// Augmented MCL's averaging, if particles are injected.
     pub injection: Option<Injection>,
-    /// How the trajectory fills readings between corrections.
-    pub between: BetweenScans,
-    /// Odometry noise weights for that filling.
-    pub noise: NoiseWeights,
+    /// How the written trajectory is made from the best lineage.
+    pub trajectory: TrajectoryOutput,
 }
 
 /// Matcher task → resampler.

@@ -368,8 +368,7 @@ impl Bolt for Resampler {
             return Ok(());
         };
         out.count("processed_scans", population.best_trajectory().len() as u64);
-        let poses =
-            trajectory::fill(&population.best_trajectory(), &self.marks, settings.between, settings.noise);
+        let poses = trajectory::fill(&population.best_trajectory(), &self.marks, settings.trajectory);
         for (stamp, pose) in poses {
             out.emit("trajectory", PoseStamped { stamp, pose }).await?;
         }

@@ -1,0 +1,316 @@
+//! The output trajectory's smoother: the best lineage's corrected poses
+//! fused with the odometry between them, each weighted by noise estimated
+//! from the run itself.
+//!
+//! A particle's corrected pose at each processed scan carries the scan
+//! matcher's error, which is white, or nearly: it does not add up from scan
+//! to scan, since every scan is matched against the same map. The odometry
+//! between two processed scans carries its own error, which does add up.
+//! Over a few metres odometry is the better of the two, over a loop the
+//! matcher is; the filter weighs them with the motion model's settings
+//! (GMapping's defaults, chosen for the particles' spread, not for a given
+//! robot) and the matcher's information (one map cell per beam, beams
+//! taken as independent), so its path follows every wobble of the matcher.
+//!
+//! After the run the whole lineage is at hand, and the two errors can be
+//! told apart by how they grow: the difference between the lineage's and
+//! the odometry's motion over m processed scans has variance 2R + mQ,
+//! where R is the matcher's error at one scan and Q the odometry's per
+//! step (Mehra's separation of measurement and process noise, taken over
+//! spans rather than one lag, since the matcher's errors at neighbouring
+//! scans are not quite independent). Systematic odometry error (a scale
+//! error, a drift per metre) is fitted first, as a linear function of the
+//! odometry's own motion, and removed, as in odometry calibration. A
+//! least-squares smoother then finds the poses that best fit both: the
+//! corrected poses with R, the calibrated odometry between them with Q.
+//! Where the matcher shows no error of its own (R near zero), the poses
+//! stay as they are.
+//!
+//! The result is the trajectory written out, not the filter's state: the
+//! particles, their maps and weights are untouched, and the smoother is a
+//! pure function of the lineage, so any number of matcher tasks writes
+//! the same trajectory.
+
+use serde::{Deserialize, Serialize};
+
+use squall_core::covariance::{IDENTITY, Mat3, ZERO, add, apply, inverse, mul, transpose};
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+
+use super::trajectory::Corrected;
+
+/// What is done to the best lineage's poses before they are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Smoother {
+    /// Fused with the calibrated odometry, noise estimated from the run
+    /// (see the module docs).
+    #[default]
+    Odometry,
+    /// Written as the filter corrected them.
+    None,
+}
+
+/// Longest span, in processed scans, over which the growth of the
+/// lineage-minus-odometry variance is fitted: long enough that errors of
+/// the matcher correlated over a few neighbouring scans count as its own
+/// (about 20 m of travel at the default update distance), short enough
+/// that the odometry's heading error has not yet curved its growth.
+const MAX_SPAN: usize = 20;
+
+/// Fewer steps than this and the noise is not estimated: the poses are
+/// kept as they are.
+const MIN_STEPS: usize = 4 * MAX_SPAN;
+
+/// Smallest variance either noise is given (m², rad²): a hundredth of a
+/// millimetre, so that the system stays well conditioned.
+const FLOOR: Real = 1e-10;
+
+/// The poses of `corrected` as `smoother` says, each with its stamp and
+/// odometry.
+pub(crate) fn smooth(corrected: &[Corrected], smoother: Smoother) -> Vec<Corrected> {
+    let steps = corrected.len().saturating_sub(1);
+    if smoother == Smoother::None || steps < MIN_STEPS {
+        return corrected.to_vec();
+    }
+    // Per step: the lineage's motion a, the odometry's u, and the
+    // difference between them, u⁻¹a, as (x, y, θ).
+    let lineage: Vec<Pose2> = corrected.windows(2).map(|w| w[1].1.relative_to(&w[0].1)).collect();
+    let odometry: Vec<Pose2> = corrected.windows(2).map(|w| w[1].2.relative_to(&w[0].2)).collect();
+    let raw: Vec<[Real; 3]> = lineage.iter().zip(&odometry).map(|(a, u)| vector(&a.relative_to(u))).collect();
+    let systematic = fit_systematic(&odometry, &raw);
+    let residual: Vec<[Real; 3]> =
+        raw.iter().zip(&odometry).map(|(e, u)| sub(*e, apply(&systematic, vector(u)))).collect();
+    let (matcher, step) = noise(&residual);
+    let deltas = solve(&lineage, &residual, matcher, step);
+    corrected
+        .iter()
+        .zip(deltas)
+        .map(|(&(stamp, pose, odometry), d)| (stamp, pose.compose(&Pose2::new(d[0], d[1], d[2])), odometry))
+        .collect()
+}
+
+fn vector(p: &Pose2) -> [Real; 3] {
+    [p.x, p.y, normalize_angle(p.theta)]
+}
+
+fn sub(a: [Real; 3], b: [Real; 3]) -> [Real; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn diagonal(v: [Real; 3]) -> Mat3 {
+    [[v[0], 0.0, 0.0], [0.0, v[1], 0.0], [0.0, 0.0, v[2]]]
+}
+
+fn scale(a: &Mat3, s: Real) -> Mat3 {
+    a.map(|row| row.map(|v| v * s))
+}
+
+/// The systematic odometry error: the matrix S for which the lineage's
+/// motion differs from the odometry's u by about S·u, by least squares
+/// (zero if the odometry's motions do not span x, y and θ).
+fn fit_systematic(odometry: &[Pose2], differences: &[[Real; 3]]) -> Mat3 {
+    let (mut normal, mut cross) = (ZERO, ZERO);
+    for (u, e) in odometry.iter().zip(differences) {
+        let u = vector(u);
+        for i in 0..3 {
+            for j in 0..3 {
+                normal[i][j] += u[i] * u[j];
+                cross[i][j] += e[i] * u[j];
+            }
+        }
+    }
+    // S = (Σ e uᵀ)(Σ u uᵀ)⁻¹, if the normal matrix is well conditioned.
+    let trace = normal[0][0] + normal[1][1] + normal[2][2];
+    let ridge = diagonal([trace * 1e-9; 3]);
+    inverse(&add(&normal, &ridge)).map_or(ZERO, |inv| mul(&cross, &inv))
+}
+
+/// The matcher's variance at one scan (R) and the odometry's per step (Q),
+/// per component: a line fitted to the variance of the differences summed
+/// over spans of 1 to [`MAX_SPAN`] steps has intercept 2R and slope Q.
+fn noise(residual: &[[Real; 3]]) -> ([Real; 3], [Real; 3]) {
+    let n = residual.len();
+    let mean: [Real; 3] = std::array::from_fn(|c| residual.iter().map(|e| e[c]).sum::<Real>() / n as Real);
+    let mut cumulative = vec![[0.0; 3]; n + 1];
+    for (k, e) in residual.iter().enumerate() {
+        cumulative[k + 1] = std::array::from_fn(|c| cumulative[k][c] + e[c] - mean[c]);
+    }
+    let (mut matcher, mut step) = ([FLOOR; 3], [FLOOR; 3]);
+    for c in 0..3 {
+        // Least squares of V(m) = α + β m over m = 1..=MAX_SPAN.
+        let (mut sm, mut smm, mut sv, mut smv) = (0.0, 0.0, 0.0, 0.0);
+        for m in 1..=MAX_SPAN {
+            let spans = n + 1 - m;
+            let v = (0..spans).map(|k| (cumulative[k + m][c] - cumulative[k][c]).powi(2)).sum::<Real>()
+                / spans as Real;
+            let m = m as Real;
+            (sm, smm, sv, smv) = (sm + m, smm + m * m, sv + v, smv + m * v);
+        }
+        let count = MAX_SPAN as Real;
+        let slope = (count * smv - sm * sv) / (count * smm - sm * sm);
+        let intercept = (sv - slope * sm) / count;
+        matcher[c] = (intercept / 2.0).max(FLOOR);
+        step[c] = slope.max(FLOOR);
+    }
+    (matcher, step)
+}
+
+/// The SE(2) adjoint of `p`: how a small motion in the frame after `p`
+/// reads in the frame before it.
+fn adjoint(p: &Pose2) -> Mat3 {
+    let (s, c) = p.theta.sin_cos();
+    [[c, -s, p.y], [s, c, -p.x], [0.0, 0.0, 1.0]]
+}
+
+/// The corrections δₖ (each applied on the right of pose k) minimising
+/// Σ δₖᵀR⁻¹δₖ + Σ rₖᵀQ⁻¹rₖ, where rₖ = eₖ + δₖ − Adj(aₖ)⁻¹δₖ₋₁ is the
+/// step's odometry residual linearised at the lineage. The system is block
+/// tridiagonal: one forward elimination and one back substitution.
+fn solve(lineage: &[Pose2], residual: &[[Real; 3]], matcher: [Real; 3], step: [Real; 3]) -> Vec<[Real; 3]> {
+    let nodes = lineage.len() + 1;
+    let prior = diagonal(matcher.map(|v| 1.0 / v));
+    let odometry = diagonal(step.map(|v| 1.0 / v));
+    // Diagonal blocks, blocks above the diagonal (node k with k + 1), and
+    // the gradient.
+    let mut diag = vec![prior; nodes];
+    let mut upper = vec![ZERO; nodes - 1];
+    let mut gradient = vec![[0.0; 3]; nodes];
+    for (k, (a, e)) in lineage.iter().zip(residual).enumerate() {
+        let back = inverse(&adjoint(a)).unwrap_or(IDENTITY);
+        let back_t = transpose(&back);
+        // rₖ₊₁ = e + δₖ₊₁ − back·δₖ.
+        diag[k + 1] = add(&diag[k + 1], &odometry);
+        diag[k] = add(&diag[k], &mul(&back_t, &mul(&odometry, &back)));
+        upper[k] = scale(&mul(&back_t, &odometry), -1.0);
+        let pull = apply(&odometry, *e);
+        gradient[k + 1] = add3(gradient[k + 1], pull);
+        gradient[k] = sub(gradient[k], apply(&back_t, pull));
+    }
+    // Block forward elimination of H δ = −g.
+    let mut pivots = Vec::with_capacity(nodes);
+    let mut rhs = Vec::with_capacity(nodes);
+    pivots.push(diag[0]);
+    rhs.push(gradient[0].map(|v| -v));
+    for k in 1..nodes {
+        let lower = transpose(&upper[k - 1]);
+        let factor = mul(&lower, &inverse(&pivots[k - 1]).unwrap_or(ZERO));
+        pivots.push(add(&diag[k], &scale(&mul(&factor, &upper[k - 1]), -1.0)));
+        rhs.push(sub(gradient[k].map(|v| -v), apply(&factor, rhs[k - 1])));
+    }
+    let mut deltas = vec![[0.0; 3]; nodes];
+    for k in (0..nodes).rev() {
+        let known = if k + 1 < nodes { apply(&upper[k], deltas[k + 1]) } else { [0.0; 3] };
+        deltas[k] = apply(&inverse(&pivots[k]).unwrap_or(ZERO), sub(rhs[k], known));
+    }
+    deltas
+}
+
+fn add3(a: [Real; 3], b: [Real; 3]) -> [Real; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use squall_core::random::standard_normal;
+
+    /// A robot driving a wavy path, 1 m per processed scan: the truth, the
+    /// odometry (2% too long, with 1 cm and 5 mrad of noise per step) and a
+    /// lineage that is the truth with `jitter` metres of white error.
+    fn run(steps: usize, jitter: Real) -> (Vec<Pose2>, Vec<Corrected>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        let (mut truth, mut odometry) = (vec![Pose2::IDENTITY], vec![Pose2::IDENTITY]);
+        for k in 0..steps {
+            let turn = 0.3 * (k as Real * 0.15).sin();
+            let step = Pose2::new(1.0, 0.0, turn);
+            truth.push(truth[k].compose(&step));
+            let measured = Pose2::new(
+                1.02 + 0.01 * standard_normal(&mut rng),
+                0.01 * standard_normal(&mut rng),
+                turn + 0.005 * standard_normal(&mut rng),
+            );
+            odometry.push(odometry[k].compose(&measured));
+        }
+        let corrected = truth
+            .iter()
+            .zip(&odometry)
+            .enumerate()
+            .map(|(k, (t, o))| {
+                let e = Pose2::new(
+                    jitter * standard_normal(&mut rng),
+                    jitter * standard_normal(&mut rng),
+                    0.2 * jitter * standard_normal(&mut rng),
+                );
+                (k as f64, t.compose(&e), *o)
+            })
+            .collect();
+        (truth, corrected)
+    }
+
+    /// Mean translational error of the motions over `span` steps.
+    fn relation_error(truth: &[Pose2], poses: &[Corrected], span: usize) -> Real {
+        let errors: Vec<Real> = (span..truth.len())
+            .map(|k| {
+                let estimated = poses[k].1.relative_to(&poses[k - span].1);
+                let e = estimated.relative_to(&truth[k].relative_to(&truth[k - span]));
+                e.x.hypot(e.y)
+            })
+            .collect();
+        errors.iter().sum::<Real>() / errors.len() as Real
+    }
+
+    #[test]
+    fn a_jittery_lineage_follows_the_odometry_locally_and_the_lineage_far() {
+        let (truth, corrected) = run(400, 0.02);
+        let smoothed = smooth(&corrected, Smoother::Odometry);
+        assert_eq!(smoothed.len(), corrected.len());
+        let (before, after) = (relation_error(&truth, &corrected, 1), relation_error(&truth, &smoothed, 1));
+        assert!(after < 0.5 * before, "one step: {after} against {before}");
+        // Odometry alone drifts by 2% and more; the smoothed poses stay
+        // with the lineage over long spans.
+        let far = relation_error(&truth, &smoothed, 100);
+        assert!(far < relation_error(&truth, &corrected, 100) + 0.01, "100 steps: {far}");
+        for (s, c) in smoothed.iter().zip(&corrected) {
+            assert_eq!((s.0, s.2), (c.0, c.2), "stamps and odometry stay");
+        }
+    }
+
+    #[test]
+    fn the_noise_is_told_apart_by_how_it_grows() {
+        let (_, corrected) = run(2000, 0.02);
+        let lineage: Vec<Pose2> = corrected.windows(2).map(|w| w[1].1.relative_to(&w[0].1)).collect();
+        let odometry: Vec<Pose2> = corrected.windows(2).map(|w| w[1].2.relative_to(&w[0].2)).collect();
+        let raw: Vec<[Real; 3]> =
+            lineage.iter().zip(&odometry).map(|(a, u)| vector(&a.relative_to(u))).collect();
+        let systematic = fit_systematic(&odometry, &raw);
+        // The lineage's steps are 2% shorter than the odometry's.
+        assert!((systematic[0][0] + 0.02).abs() < 0.003, "{systematic:?}");
+        let residual: Vec<[Real; 3]> =
+            raw.iter().zip(&odometry).map(|(e, u)| sub(*e, apply(&systematic, vector(u)))).collect();
+        let (matcher, step) = noise(&residual);
+        for c in 0..2 {
+            let (r, q) = (matcher[c].sqrt(), step[c].sqrt());
+            assert!((r - 0.02).abs() < 0.004, "the lineage's 2 cm: {r}");
+            assert!(q < 0.02, "the odometry's noise per step: {q}");
+        }
+    }
+
+    #[test]
+    fn an_exact_lineage_barely_moves_and_short_ones_stay_as_they_are() {
+        let (truth, corrected) = run(400, 0.0);
+        let smoothed = smooth(&corrected, Smoother::Odometry);
+        // Over 400 steps the noise estimate is itself uncertain and finds
+        // a few millimetres of error in the lineage: the poses move by
+        // that much, a fifth of a map cell at most.
+        let moved: Vec<Real> = smoothed.iter().zip(&truth).map(|(s, t)| s.1.distance(t)).collect();
+        let mean = moved.iter().sum::<Real>() / moved.len() as Real;
+        let most = moved.iter().copied().fold(0.0, Real::max);
+        assert!(mean < 0.003 && most < 0.01, "moved {mean} on average, {most} at most");
+        let (_, short) = run(MIN_STEPS - 1, 0.02);
+        assert_eq!(smooth(&short, Smoother::Odometry), short);
+        let (_, long) = run(400, 0.02);
+        assert_eq!(smooth(&long, Smoother::None), long);
+    }
+}
