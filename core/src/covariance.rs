@@ -15,6 +15,16 @@ pub const ZERO: Mat3 = [[0.0; 3]; 3];
 /// The identity.
 pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
+/// The diagonal matrix with `v` on its diagonal.
+pub fn diagonal(v: [Real; 3]) -> Mat3 {
+    [[v[0], 0.0, 0.0], [0.0, v[1], 0.0], [0.0, 0.0, v[2]]]
+}
+
+/// `s · a`.
+pub fn scale(a: &Mat3, s: Real) -> Mat3 {
+    a.map(|row| row.map(|v| v * s))
+}
+
 /// `a + b`.
 pub fn add(a: &Mat3, b: &Mat3) -> Mat3 {
     std::array::from_fn(|i| std::array::from_fn(|j| a[i][j] + b[i][j]))

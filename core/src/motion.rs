@@ -7,7 +7,7 @@ use rand::Rng;
 
 use serde::{Deserialize, Serialize};
 
-use crate::covariance::{Mat3, add, mul, symmetric, transpose};
+use crate::covariance::{Mat3, add, diagonal, mul, symmetric, transpose};
 use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::random::standard_normal;
 
@@ -74,7 +74,7 @@ pub fn propagate_motion(
     let f = [[1.0, 0.0, -(s * d.x + c * d.y)], [0.0, 1.0, c * d.x - s * d.y], [0.0, 0.0, 1.0]];
     let g = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
     let [sx, sy, st] = step_deviations(&d, o);
-    let q = [[sx * sx, 0.0, 0.0], [0.0, sy * sy, 0.0], [0.0, 0.0, st * st]];
+    let q = diagonal([sx * sx, sy * sy, st * st]);
     let carried = mul(&mul(&f, covariance), &transpose(&f));
     let added = mul(&mul(&g, &q), &transpose(&g));
     *covariance = symmetric(&add(&carried, &added));

@@ -33,7 +33,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use squall_core::covariance::{IDENTITY, Mat3, ZERO, add, apply, inverse, mul, transpose};
+use squall_core::covariance::{IDENTITY, Mat3, ZERO, add, apply, diagonal, inverse, mul, scale, transpose};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 
 use super::trajectory::Corrected;
@@ -95,14 +95,6 @@ fn vector(p: &Pose2) -> [Real; 3] {
 
 fn sub(a: [Real; 3], b: [Real; 3]) -> [Real; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn diagonal(v: [Real; 3]) -> Mat3 {
-    [[v[0], 0.0, 0.0], [0.0, v[1], 0.0], [0.0, 0.0, v[2]]]
-}
-
-fn scale(a: &Mat3, s: Real) -> Mat3 {
-    a.map(|row| row.map(|v| v * s))
 }
 
 /// The systematic odometry error: the matrix S for which the lineage's
@@ -186,21 +178,23 @@ fn solve(lineage: &[Pose2], residual: &[[Real; 3]], matcher: [Real; 3], step: [R
         gradient[k + 1] = add3(gradient[k + 1], pull);
         gradient[k] = sub(gradient[k], apply(&back_t, pull));
     }
-    // Block forward elimination of H δ = −g.
-    let mut pivots = Vec::with_capacity(nodes);
+    // Block forward elimination of H δ = −g, keeping each pivot's inverse
+    // for the back substitution.
+    let pivot_inverse = |pivot: &Mat3| inverse(pivot).unwrap_or(ZERO);
+    let mut inverses = Vec::with_capacity(nodes);
     let mut rhs = Vec::with_capacity(nodes);
-    pivots.push(diag[0]);
+    inverses.push(pivot_inverse(&diag[0]));
     rhs.push(gradient[0].map(|v| -v));
     for k in 1..nodes {
         let lower = transpose(&upper[k - 1]);
-        let factor = mul(&lower, &inverse(&pivots[k - 1]).unwrap_or(ZERO));
-        pivots.push(add(&diag[k], &scale(&mul(&factor, &upper[k - 1]), -1.0)));
+        let factor = mul(&lower, &inverses[k - 1]);
+        inverses.push(pivot_inverse(&add(&diag[k], &scale(&mul(&factor, &upper[k - 1]), -1.0))));
         rhs.push(sub(gradient[k].map(|v| -v), apply(&factor, rhs[k - 1])));
     }
     let mut deltas = vec![[0.0; 3]; nodes];
     for k in (0..nodes).rev() {
         let known = if k + 1 < nodes { apply(&upper[k], deltas[k + 1]) } else { [0.0; 3] };
-        deltas[k] = apply(&inverse(&pivots[k]).unwrap_or(ZERO), sub(rhs[k], known));
+        deltas[k] = apply(&inverses[k], sub(rhs[k], known));
     }
     deltas
 }

@@ -11,7 +11,9 @@
 //! strays far from the odometry, where the odometry is sure, weighs less.
 
 use rand::Rng;
-use squall_core::covariance::{IDENTITY, Mat3, add, apply, cholesky, determinant, inverse, mul, quadratic};
+use squall_core::covariance::{
+    IDENTITY, Mat3, add, apply, cholesky, determinant, diagonal, inverse, mul, quadratic,
+};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 use squall_core::random::standard_normal;
 
@@ -43,8 +45,7 @@ pub(crate) fn draw<R: Rng + ?Sized>(
     motion: &Mat3,
     rng: &mut R,
 ) -> Drawn {
-    let floor = [[MOTION_FLOOR, 0.0, 0.0], [0.0, MOTION_FLOOR, 0.0], [0.0, 0.0, MOTION_FLOOR]];
-    let motion = add(motion, &floor);
+    let motion = add(motion, &diagonal([MOTION_FLOOR; 3]));
     let prior = inverse(&motion).expect("a covariance plus a positive floor is invertible");
     let posterior = inverse(&add(information, &prior)).expect("positive definite");
     let offset =
@@ -53,13 +54,9 @@ pub(crate) fn draw<R: Rng + ?Sized>(
     let l = cholesky(&posterior);
     let e = [standard_normal(rng), standard_normal(rng), standard_normal(rng)];
     let noise = apply(&l, e);
-    let pose = Pose2::new(
-        matched.x + shift[0] + noise[0],
-        matched.y + shift[1] + noise[1],
-        normalize_angle(matched.theta + shift[2] + noise[2]),
-    );
-    let mean =
-        Pose2::new(matched.x + shift[0], matched.y + shift[1], normalize_angle(matched.theta + shift[2]));
+    let centre = [matched.x + shift[0], matched.y + shift[1], matched.theta + shift[2]];
+    let mean = Pose2::new(centre[0], centre[1], normalize_angle(centre[2]));
+    let pose = Pose2::new(centre[0] + noise[0], centre[1] + noise[1], normalize_angle(centre[2] + noise[2]));
     // ∫ exp(−½ (x − m)ᵀ H (x − m)) N(x; p, Σ) dx
     //   = |I + ΣH|^(−½) exp(−½ dᵀ H (I + ΣH)⁻¹ d), d = p − m,
     // which holds for a singular H (a direction the scan cannot see).
@@ -78,7 +75,7 @@ mod tests {
     use squall_core::covariance::ZERO;
 
     fn diag(a: Real, b: Real, c: Real) -> Mat3 {
-        [[a, 0.0, 0.0], [0.0, b, 0.0], [0.0, 0.0, c]]
+        diagonal([a, b, c])
     }
 
     fn draws(information: &Mat3, motion: &Mat3) -> (Vec<Drawn>, Pose2, Pose2) {

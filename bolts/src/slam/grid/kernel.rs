@@ -15,12 +15,28 @@ impl TiledGrid {
     /// `None` if there is none. `k` is at most 14.
     #[inline]
     pub fn nearest_backed_wall(&self, hit: (Real, Real), back: (i64, i64), k: i64) -> Option<Real> {
+        self.nearest_backed_mean(hit, back, k).map(|(d2, _)| d2)
+    }
+
+    /// [`Self::nearest_backed_wall`] with the mean hit point it found (the
+    /// first of equally near ones, row by row).
+    #[inline]
+    pub fn nearest_backed_mean(
+        &self,
+        hit: (Real, Real),
+        back: (i64, i64),
+        k: i64,
+    ) -> Option<(Real, (Real, Real))> {
         let (hx, hy) = (hit.0 as f32, hit.1 as f32);
-        let mut best = f32::INFINITY;
+        let mut best = (f32::INFINITY, (0.0f32, 0.0f32));
         self.backed_walls(self.cell_of(hit.0, hit.1), back, k, |mx, my| {
-            best = best.min((hx - mx).powi(2) + (hy - my).powi(2));
+            let d2 = (hx - mx).powi(2) + (hy - my).powi(2);
+            if d2 < best.0 {
+                best = (d2, (mx, my));
+            }
         });
-        (best < f32::INFINITY).then_some(Real::from(best))
+        let (d2, (mx, my)) = best;
+        (d2 < f32::INFINITY).then(|| (Real::from(d2), (Real::from(mx), Real::from(my))))
     }
 
     /// The candidates of [`Self::nearest_backed_wall`] around cell
@@ -44,12 +60,7 @@ impl TiledGrid {
         }
         // The window and its back neighbours lie in one tile: find the
         // candidates with bit operations.
-        let Some(t) = self
-            .slot((centre.0 >> TILE_SHIFT, centre.1 >> TILE_SHIFT))
-            .and_then(|s| self.tiles[s].as_deref())
-        else {
-            return;
-        };
+        let Some(t) = self.tile_at(centre) else { return };
         let width = (1u32 << (2 * k + 1)) - 1;
         let x0 = (lx - k) as u32;
         let bx = (lx - k + back.0) as u32;
@@ -135,12 +146,7 @@ impl TiledGrid {
             }
             return;
         }
-        let Some(t) = self
-            .slot((centre.0 >> TILE_SHIFT, centre.1 >> TILE_SHIFT))
-            .and_then(|s| self.tiles[s].as_deref())
-        else {
-            return;
-        };
+        let Some(t) = self.tile_at(centre) else { return };
         let width = (1u32 << (2 * k + 1)) - 1;
         let x0 = (lx - k) as u32;
         for y in (ly - k) as usize..=(ly + k) as usize {

@@ -157,11 +157,16 @@ impl TiledGrid {
             .then(|| j as usize * self.tiles_wide + i as usize)
     }
 
+    /// The tile holding cell `c`, if one does.
+    #[inline]
+    fn tile_at(&self, c: (i64, i64)) -> Option<&Tile> {
+        self.slot((c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT)).and_then(|s| self.tiles[s].as_deref())
+    }
+
     /// The cell `c`; unvisited (default) outside the explored area.
     #[inline]
     pub fn get(&self, c: (i64, i64)) -> Cell {
-        let tile = (c.0 >> TILE_SHIFT, c.1 >> TILE_SHIFT);
-        match self.slot(tile).and_then(|s| self.tiles[s].as_deref()) {
+        match self.tile_at(c) {
             Some(t) => t.cells.get(((c.1 & TILE_MASK) as usize) * TILE_SIDE + (c.0 & TILE_MASK) as usize),
             None => Cell::default(),
         }

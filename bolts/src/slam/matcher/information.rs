@@ -33,18 +33,8 @@ impl Matcher {
         let mut h = ZERO;
         for d in &self.turned.dirs {
             let end = (laser.x + d.dx, laser.y + d.dy);
-            let mut best = (f32::INFINITY, (0.0f32, 0.0f32));
-            let (hx, hy) = (end.0 as f32, end.1 as f32);
-            grid.backed_walls(grid.cell_of(end.0, end.1), d.back, o.kernel, |mx, my| {
-                let d2 = (hx - mx).powi(2) + (hy - my).powi(2);
-                if d2 < best.0 {
-                    best = (d2, (mx, my));
-                }
-            });
-            if best.0 == f32::INFINITY {
-                continue;
-            }
-            let p = across_wall(grid, (Real::from(best.1.0), Real::from(best.1.1)));
+            let Some((_, mean)) = grid.nearest_backed_mean(end, d.back, o.kernel) else { continue };
+            let p = across_wall(grid, mean);
             // ∂end/∂(x, y, θ) = [I | j] with j the end point's swing.
             let j = (-(end.1 - pose.y), end.0 - pose.x);
             let pj = (p[0][0] * j.0 + p[0][1] * j.1, p[1][0] * j.0 + p[1][1] * j.1);
