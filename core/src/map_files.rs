@@ -4,9 +4,10 @@
 //! Pixel values follow `map_saver`: occupied (≥ 65 %) black 0, free
 //! (≤ 25 %) white 254, unknown grey 205. Image row 0 is the top of the map.
 
+use std::io::Write;
 use std::path::Path;
 
-use squall_topology::fsio::write_atomic;
+use squall_topology::fsio::{write_atomic, write_atomic_with};
 
 use crate::geometry::{Pose2, line_cells};
 use crate::occupancy::{OccupancyGrid, UNKNOWN};
@@ -26,28 +27,41 @@ fn pixel(value: i8) -> u8 {
     }
 }
 
-/// Grey pixels, top row first. An error if the grid holds fewer cells
-/// than its width × height.
-pub fn grey_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>> {
-    let Some(size) = grid.width.checked_mul(grid.height).filter(|&n| n <= grid.cells.len()) else {
-        return Err(Error::GridShape { width: grid.width, height: grid.height, cells: grid.cells.len() });
-    };
-    let mut out = Vec::with_capacity(size);
-    for row in (0..grid.height).rev() {
-        out.extend(grid.cells[row * grid.width..(row + 1) * grid.width].iter().map(|&v| pixel(v)));
+/// An error unless the grid holds its width × height cells.
+fn check_shape(grid: &OccupancyGrid) -> Result<()> {
+    match grid.width.checked_mul(grid.height) {
+        Some(size) if size <= grid.cells.len() => Ok(()),
+        _ => Err(Error::GridShape { width: grid.width, height: grid.height, cells: grid.cells.len() }),
     }
-    Ok(out)
 }
 
-/// Writes `DIR/STEM.pgm` and `DIR/STEM.yaml` (atomically).
+/// The grey pixels of image row `row` (row 0 is the top of the map); the
+/// grid's shape must have been checked.
+fn grey_row(grid: &OccupancyGrid, row: usize) -> impl Iterator<Item = u8> + '_ {
+    let map_row = grid.height - 1 - row;
+    grid.cells[map_row * grid.width..(map_row + 1) * grid.width].iter().map(|&v| pixel(v))
+}
+
+/// Writes `DIR/STEM.pgm` and `DIR/STEM.yaml` (atomically). The image is
+/// streamed a row at a time: a large map is never held twice in memory.
 pub fn write_pgm_yaml(grid: &OccupancyGrid, dir: &Path, stem: &str) -> Result<()> {
-    let mut pgm = format!(
-        "P5\n# squall occupancy map, {} m/cell\n{} {}\n255\n",
-        grid.resolution, grid.width, grid.height
-    )
-    .into_bytes();
-    pgm.extend(grey_pixels(grid)?);
-    write_file(&dir.join(format!("{stem}.pgm")), &pgm)?;
+    check_shape(grid)?;
+    let path = dir.join(format!("{stem}.pgm"));
+    write_atomic_with(&path, |out| {
+        write!(
+            out,
+            "P5\n# squall occupancy map, {} m/cell\n{} {}\n255\n",
+            grid.resolution, grid.width, grid.height
+        )?;
+        let mut row = Vec::with_capacity(grid.width);
+        for y in 0..grid.height {
+            row.clear();
+            row.extend(grey_row(grid, y));
+            out.write_all(&row)?;
+        }
+        Ok(())
+    })
+    .map_err(|source| Error::Write { path: path.clone(), source })?;
     let yaml = format!(
         "image: {stem}.pgm\nmode: trinary\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: {}\nfree_thresh: {}\n",
         grid.resolution,
@@ -56,40 +70,57 @@ pub fn write_pgm_yaml(grid: &OccupancyGrid, dir: &Path, stem: &str) -> Result<()
         f64::from(OCCUPIED_PERCENT) / 100.0,
         f64::from(FREE_PERCENT) / 100.0,
     );
-    write_file(&dir.join(format!("{stem}.yaml")), yaml.as_bytes())
+    let path = dir.join(format!("{stem}.yaml"));
+    write_atomic(&path, yaml.as_bytes()).map_err(|source| Error::Write { path, source })
 }
 
-/// Writes `bytes` to `path` atomically; an error names the file.
-fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, bytes).map_err(|source| Error::Write { path: path.to_path_buf(), source })
-}
+/// Colour of the trajectory drawn on the PNG.
+const PATH_RGB: [u8; 3] = [220, 20, 20];
 
-/// Encodes the map as PNG; with a trajectory, as RGB with the path drawn
-/// in red.
-pub fn png_bytes(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Result<Vec<u8>> {
-    let grey = grey_pixels(grid)?;
-    let (w, h) = (grid.width as u32, grid.height as u32);
-    let mut out = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut out, w, h);
-        encoder.set_depth(png::BitDepth::Eight);
-        if trajectory.is_empty() {
-            encoder.set_color(png::ColorType::Grayscale);
-            encoder.write_header()?.write_image_data(&grey)?;
+/// Encodes the map as PNG into `out`, a row at a time; with a trajectory,
+/// as RGB with the path drawn in red.
+pub fn encode_png<W: Write>(grid: &OccupancyGrid, trajectory: &[Pose2], out: W) -> Result<()> {
+    check_shape(grid)?;
+    let rgb = !trajectory.is_empty();
+    let mut encoder = png::Encoder::new(out, grid.width as u32, grid.height as u32);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_color(if rgb { png::ColorType::Rgb } else { png::ColorType::Grayscale });
+    let mut writer = encoder.write_header()?;
+    let mut stream = writer.stream_writer()?;
+    let path = path_pixels(grid, trajectory);
+    let mut path = path.iter().peekable();
+    let mut row = Vec::with_capacity(grid.width * if rgb { 3 } else { 1 });
+    for y in 0..grid.height {
+        row.clear();
+        if rgb {
+            row.extend(grey_row(grid, y).flat_map(|g| [g, g, g]));
+            while let Some(&(_, x)) = path.next_if(|&&(py, _)| py == y) {
+                row[3 * x..3 * x + 3].copy_from_slice(&PATH_RGB);
+            }
         } else {
-            encoder.set_color(png::ColorType::Rgb);
-            let mut rgb: Vec<u8> = grey.iter().flat_map(|&g| [g, g, g]).collect();
-            draw_path(grid, trajectory, &mut rgb);
-            encoder.write_header()?.write_image_data(&rgb)?;
+            row.extend(grey_row(grid, y));
         }
+        stream.write_all(&row).map_err(png::EncodingError::from)?;
     }
+    stream.finish()?;
+    Ok(())
+}
+
+/// The map as PNG bytes (see [`encode_png`]).
+pub fn png_bytes(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    encode_png(grid, trajectory, &mut out)?;
     Ok(out)
 }
 
-/// Writes `path` as PNG (atomically).
+/// Writes `path` as PNG (atomically), streamed a row at a time.
 pub fn write_png(grid: &OccupancyGrid, trajectory: &[Pose2], path: &Path) -> Result<()> {
-    let bytes = png_bytes(grid, trajectory)?;
-    write_file(path, &bytes)
+    check_shape(grid)?;
+    write_atomic_with(path, |out| match encode_png(grid, trajectory, out) {
+        Err(Error::PngEncode(png::EncodingError::IoError(e))) => Err(e),
+        other => other.map_err(std::io::Error::other),
+    })
+    .map_err(|source| Error::Write { path: path.to_path_buf(), source })
 }
 
 /// Image pixel (column, row from the top) of a world point, if inside.
@@ -97,11 +128,13 @@ fn image_pixel(grid: &OccupancyGrid, p: &Pose2) -> Option<(i64, i64)> {
     grid.cell_of(p.x, p.y).map(|(cx, cy)| (cx as i64, (grid.height - 1 - cy) as i64))
 }
 
-fn draw_path(grid: &OccupancyGrid, trajectory: &[Pose2], rgb: &mut [u8]) {
+/// The image pixels (row, column) the trajectory's segments cross,
+/// sorted, each once.
+fn path_pixels(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
     let mut put = |x: i64, y: i64| {
         if x >= 0 && y >= 0 && (x as usize) < grid.width && (y as usize) < grid.height {
-            let i = 3 * (y as usize * grid.width + x as usize);
-            rgb[i..i + 3].copy_from_slice(&[220, 20, 20]);
+            out.push((y as usize, x as usize));
         }
     };
     let pixels: Vec<Option<(i64, i64)>> = trajectory.iter().map(|p| image_pixel(grid, p)).collect();
@@ -113,6 +146,9 @@ fn draw_path(grid: &OccupancyGrid, trajectory: &[Pose2], rgb: &mut [u8]) {
     if let Some(Some((x, y))) = pixels.first() {
         put(*x, *y);
     }
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 #[cfg(test)]

@@ -217,6 +217,14 @@ impl<M: ParticleModel> Shard<M> {
     pub fn held(&self) -> &[(usize, M::State)] {
         &self.held
     }
+
+    /// Drops every state but `slot`'s: once the run has ended only the best
+    /// particle's snapshot is still wanted, and building it (a whole map,
+    /// for SLAM) should reuse the others' memory, not add to it.
+    pub fn keep_only(&mut self, slot: usize) {
+        self.held.retain(|h| h.0 == slot);
+        self.held.shrink_to_fit();
+    }
 }
 
 #[cfg(test)]
@@ -316,6 +324,17 @@ mod tests {
             shard.held().iter().map(|h| h.1.clone()).collect::<Vec<_>>(),
             vec![vec![0.5], vec![-1.0], vec![0.5]]
         );
+    }
+
+    #[test]
+    fn keeping_one_slot_drops_the_others_and_keeps_its_state() {
+        let mut shard: Shard<Walk> = Shard::start(&Walk, 0, 9, [0, 1, 2], &vec![0.5], &0.0);
+        let kept = shard.state(1).cloned();
+        shard.keep_only(1);
+        assert_eq!(shard.slots().collect::<Vec<_>>(), vec![1]);
+        assert_eq!(shard.state(1).cloned(), kept);
+        shard.keep_only(7);
+        assert!(shard.held().is_empty(), "a slot not held keeps nothing");
     }
 
     #[test]

@@ -441,9 +441,10 @@ impl<M: HostedModel> Bolt for Matcher<M> {
         if self.pending.is_some() || !self.queued.is_empty() {
             return Err("pf.matcher: the run ended with a reading unfinished".into());
         }
-        if let Some(shard) = &self.shard {
+        if let Some(shard) = &mut self.shard {
             // This task's particles' memory, shared map tiles counted once.
             out.count("map_bytes", self.model.memory(shard.held().iter().map(|(_, s)| s)));
+            shard.keep_only(self.best);
         }
         self.emit_snapshot(out).await
     }
