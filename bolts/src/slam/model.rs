@@ -14,7 +14,7 @@ use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::old_map::{MapHistory, search_old_map};
 use crate::slam::options::{Proposal, SlamOptions};
 use crate::slam::proposal::draw;
-use squall_core::covariance::{Mat3, ZERO};
+use squall_core::covariance::{Mat3, ZERO, scale};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 use squall_core::motion::{propagate_motion, sample_motion};
 use squall_core::sensor::LaserReading;
@@ -183,21 +183,22 @@ impl ParticleModel for SlamModel {
         let start = p.noisy.take().unwrap_or(p.pose);
         let climbed = matcher.refine(&p.map, &start, prepared, o);
         let m = search_old_map(matcher, &p.map, &p.history, climbed, prepared, o);
-        let fit = m.log_likelihood;
+        let fit = m.log_likelihood * prepared.per_beam();
         match o.proposal {
             Proposal::Climb => {
                 // A climb that matched nothing leaves the pose where it was.
                 p.pose = m.pose;
                 p.estimate = m.pose;
-                Correction { log_likelihood: m.log_likelihood, evaluations: m.evaluations, fit }
+                Correction { log_likelihood: fit, evaluations: m.evaluations, fit }
             }
             Proposal::Gaussian => {
-                let information = matcher.information(&p.map, &m.pose, prepared, o);
+                let information =
+                    scale(&matcher.information(&p.map, &m.pose, prepared, o), prepared.per_beam());
                 let drawn = draw(&m.pose, &information, &p.pose, &p.motion, rng);
                 p.pose = drawn.pose;
                 p.estimate = drawn.mean;
                 p.motion = ZERO;
-                let log_likelihood = m.log_likelihood + drawn.log_agreement;
+                let log_likelihood = fit + drawn.log_agreement;
                 Correction { log_likelihood, evaluations: m.evaluations, fit }
             }
         }

@@ -28,25 +28,57 @@ impl Beam {
 }
 
 /// A reading prepared for matching: usable beams only.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct PreparedScan {
     pub(super) beams: Vec<Beam>,
     pub(super) laser_offset: Pose2,
+    /// What each beam matched counts for in the particle's weight and the
+    /// scan's information: the share of the laser's view it stands for,
+    /// relative to a full scan thinned by `lskip` (1 there; see
+    /// [`PreparedScan::new`]).
+    per_beam: Real,
+}
+
+impl Default for PreparedScan {
+    fn default() -> Self {
+        PreparedScan { beams: Vec::new(), laser_offset: Pose2::default(), per_beam: 1.0 }
+    }
 }
 
 impl PreparedScan {
-    /// Keeps valid beams up to `max_urange`, every (lskip+1)-th.
+    /// Keeps the usable beams (valid, up to `max_urange`), every
+    /// `stride`-th. `lskip` sets the budget: a scan whose beams all return
+    /// is matched with every (lskip+1)-th, which saves time where
+    /// neighbouring beams see the same wall (decision 0001). A scan whose
+    /// beams mostly see nothing (open space, a long-range laser outdoors)
+    /// would be left with few beams that way; its stride is the whole
+    /// number nearest to its usable beams over the budget (at least 1), so
+    /// it is matched with about as many beams as a full scan, and never
+    /// more. Each beam then counts for `stride / (lskip+1)` of a full
+    /// scan's beam in the weight and the information: how much a scan
+    /// tells about the pose depends on what the laser saw, not on how
+    /// densely the matcher samples it, so the filter's confidence is the
+    /// same whatever the stride.
     pub(crate) fn new(scan: &LaserReading, o: &SlamOptions) -> Self {
+        let usable = |i: &usize| scan.is_valid(*i) && Real::from(scan.ranges[*i]) <= o.max_urange;
+        let thinned = o.lskip + 1;
+        let budget = scan.ranges.len().div_ceil(thinned).max(1);
+        let returns = (0..scan.ranges.len()).filter(usable).count();
+        let stride = ((returns as Real / budget as Real).round() as usize).clamp(1, thinned);
         let beams = (0..scan.ranges.len())
-            .filter(|&i| {
-                i % (o.lskip + 1) == 0 && scan.is_valid(i) && Real::from(scan.ranges[i]) <= o.max_urange
-            })
+            .filter(|i| i % stride == 0 && usable(i))
             .map(|i| {
                 let (sin, cos) = scan.beam_angle(i).sin_cos();
                 Beam { range: Real::from(scan.ranges[i]), cos, sin }
             })
             .collect();
-        PreparedScan { beams, laser_offset: scan.laser_offset }
+        PreparedScan { beams, laser_offset: scan.laser_offset, per_beam: stride as Real / thinned as Real }
+    }
+
+    /// What a matched beam counts for in the weight and the information
+    /// (see [`PreparedScan::new`]).
+    pub(crate) fn per_beam(&self) -> Real {
+        self.per_beam
     }
 
     /// Every `stride`-th beam of this scan, into `out` (reused, so that
@@ -57,6 +89,7 @@ impl PreparedScan {
         out.beams.clear();
         out.beams.extend(self.beams.iter().step_by(stride.max(1)));
         out.laser_offset = self.laser_offset;
+        out.per_beam = self.per_beam;
     }
 
     /// Beams that will be matched.

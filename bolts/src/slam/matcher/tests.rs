@@ -47,12 +47,36 @@ fn a_prepared_scan_keeps_every_lskip_plus_first_valid_beam_within_range() {
         let o = SlamOptions { lskip, max_urange, ..SlamOptions::default() };
         PreparedScan::new(&reading, &o).beams.iter().map(|b| b.range).collect::<Vec<_>>()
     };
-    // Beam 2 is no return, beam 4 beyond max_urange.
+    // Beam 2 is no return, beam 4 beyond max_urange: 6 of 8 usable. With
+    // lskip 1 a full scan would be matched with 4 beams; 6 / 4 rounds to
+    // a stride of 2, with lskip 3 (budget 2) to 3.
     assert_eq!(ranges(0, 80.0), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     assert_eq!(ranges(1, 80.0), [1.0, 5.0]);
-    assert_eq!(ranges(3, 80.0), [1.0]);
+    assert_eq!(ranges(3, 80.0), [1.0, 3.0, 5.0]);
     assert_eq!(ranges(1, 100.0), [1.0, 90.0, 5.0]);
     assert_eq!(SlamOptions::default().lskip, 1, "the default matches every other beam");
+}
+
+#[test]
+fn a_sparse_scan_keeps_every_beam_and_each_counts_for_less() {
+    let o = SlamOptions::default();
+    let full = scan_of(&room(), &Pose2::new(3.3, 1.7, 0.4));
+    let dense = PreparedScan::new(&full, &o);
+    assert_eq!((dense.len(), dense.per_beam()), (180, 1.0), "every other beam of 360, each a full one");
+    // Open space: only 160 of the 360 beams return (fewer than 3/4 of the
+    // 180 a full scan is matched with, so the stride rounds to 1).
+    let mut open = full.clone();
+    open.ranges[160..].fill(open.range_max as f32);
+    let sparse = PreparedScan::new(&open, &o);
+    assert_eq!(sparse.len(), 160, "every returning beam");
+    assert_eq!(sparse.per_beam(), 0.5, "each stands for half of a full scan's beam");
+    // At 3/4 and above, every other beam, as for a full scan.
+    open.ranges[..270].copy_from_slice(&full.ranges[..270]);
+    let most = PreparedScan::new(&open, &o);
+    assert_eq!((most.len(), most.per_beam()), (135, 1.0));
+    let mut coarse = PreparedScan::default();
+    sparse.every_nth_into(4, &mut coarse);
+    assert_eq!((coarse.len(), coarse.per_beam()), (40, 0.5), "a coarse pass keeps the weight");
 }
 
 #[test]
