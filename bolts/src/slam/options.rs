@@ -95,10 +95,13 @@ pub struct SlamOptions {
     /// Smoothing of the weights (log-likelihoods are divided by
     /// `ogain` × particles before exponentiating). The default is 3.
     pub ogain: Real,
-    /// Match and weigh with every (lskip+1)-th beam; maps still get every
-    /// beam. The default is 1, every other beam: a third less time per
-    /// processed scan, at the accuracy of every beam within the spread of
-    /// seeds (docs/decisions/0001-lskip-default-1.md). GMapping's is 0.
+    /// Match and weigh a scan whose beams return with every (lskip+1)-th
+    /// beam; a scan whose beams mostly return nothing keeps more, each
+    /// counting for its share of the view (see `PreparedScan::new`); maps
+    /// still get every beam. The default is 1, every other beam: a third
+    /// less time per processed scan, at the accuracy of every beam within
+    /// the spread of seeds (docs/decisions/0001-lskip-default-1.md).
+    /// GMapping's is 0.
     pub lskip: usize,
     /// Translation noise per metre of translation. The default is 0.1.
     pub srr: Real,
