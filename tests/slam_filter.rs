@@ -134,19 +134,22 @@ fn campus_error(proposal: squall::bolts::slam::options::Proposal) -> (f64, f64) 
     (score(&slam, &all).trans_mean, score(&odometry, &all).trans_mean)
 }
 
-/// On the open campus most beams meet nothing, and GMapping's proposal
-/// (each particle's pose the mode its climb reached from a noisy start)
-/// wanders far from a good odometry; the Gaussian proposal keeps the
-/// odometry along what the scan cannot see and weighs the two.
+/// On the open campus most beams meet nothing. Matched with every other
+/// beam, its scans kept few, and both proposals wandered from a good
+/// odometry (2 min: the Gaussian 0.050 m, GMapping's 0.106 m). Matched with
+/// every returning beam, each counting for its share of the view
+/// (`PreparedScan::new`), both keep to about a centimetre (measured 0.0126
+/// and 0.0115 m; the odometry 0.0040 m).
 #[test]
-fn on_the_open_campus_the_gaussian_proposal_keeps_closer_to_the_truth() {
+fn on_the_open_campus_both_proposals_keep_close_to_the_truth() {
     use squall::bolts::slam::options::Proposal;
     let (gaussian, odometry) = campus_error(Proposal::Gaussian);
     let (climb, _) = campus_error(Proposal::Climb);
     eprintln!(
         "campus, 120 s, good odometry: gaussian {gaussian:.4} m, climb {climb:.4} m, odometry {odometry:.4} m"
     );
-    assert!(gaussian < 0.6 * climb, "gaussian {gaussian:.4} m against climb {climb:.4} m");
+    assert!(gaussian < 0.02, "gaussian {gaussian:.4} m");
+    assert!(climb < 0.02, "climb {climb:.4} m");
 }
 
 /// Some lasers report each scan with its own start angle and beam count
