@@ -115,6 +115,8 @@ pub fn png_bytes(grid: &OccupancyGrid, trajectory: &[Pose2]) -> Result<Vec<u8>> 
 
 /// Writes `path` as PNG (atomically), streamed a row at a time.
 pub fn write_png(grid: &OccupancyGrid, trajectory: &[Pose2], path: &Path) -> Result<()> {
+    // Checked here too, before any file is made, so that a grid short of
+    // cells is reported as such and not as a failed write.
     check_shape(grid)?;
     write_atomic_with(path, |out| match encode_png(grid, trajectory, out) {
         Err(Error::PngEncode(png::EncodingError::IoError(e))) => Err(e),
