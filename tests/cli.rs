@@ -383,18 +383,8 @@ fn sim_writes_a_log_that_eval_and_topologies_read() {
     for f in ["sim.clf", "ground_truth.tum", "sim.relations", "world.png"] {
         assert!(dir.join(f).exists(), "{f} missing");
     }
-    let gt = dir.join("ground_truth.tum");
-    let rel = dir.join("sim.relations");
-    let out = squall(&[
-        "eval",
-        "--trajectory",
-        gt.to_str().unwrap(),
-        "--relations",
-        rel.to_str().unwrap(),
-        "--json",
-    ]);
-    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
-    assert!(v["trans_mean"].as_f64().unwrap() < 1e-5, "{v}");
+    let error = relation_error(&dir.join("ground_truth.tum"), &dir.join("sim.relations"));
+    assert!(error < 1e-5, "the ground truth scores {error} m");
 
     let out = squall(&["sim", "--world", "nowhere.txt", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
@@ -585,6 +575,61 @@ fn slam_on_the_simulator_and_its_argument_checks() {
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("cutoff"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The relation error (m) of the trajectory file `trajectory` against
+/// `relations`, as `squall eval --json` reports it.
+fn relation_error(trajectory: &Path, relations: &Path) -> f64 {
+    let out = squall(&[
+        "eval",
+        "--trajectory",
+        trajectory.to_str().unwrap(),
+        "--relations",
+        relations.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    v["trans_mean"].as_f64().unwrap_or_else(|| panic!("{v}"))
+}
+
+#[test]
+fn the_backend_closes_the_simulated_offices_loops_and_rebuilds_the_map() {
+    // The main job's world and seed, with its ground-truth relations.
+    let sim = out_dir("backend-sim");
+    let out = squall(&["sim", "--seed", "42", "--out", sim.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let relations = sim.join("sim.relations");
+    let on = out_dir("backend-on");
+    let off = out_dir("backend-off");
+    let out = squall(&["slam", "--out", on.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = squall(&["slam", "--set", "backend.params.enabled=false", "--out", off.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let component = |dir: &Path, name: &str| {
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+        m["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap().clone()
+    };
+    let backend = component(&on, "backend");
+    assert!(backend["custom"]["loops"].as_u64().unwrap() > 10, "{backend}");
+    assert_eq!(component(&off, "backend")["custom"]["searches"].as_u64(), Some(0));
+    // The matcher's maps pass through either way; with loops closed, the
+    // map rebuilt along the corrected poses comes last.
+    let received = |dir: &Path| component(dir, "map")["received"].as_u64().unwrap();
+    assert_eq!(received(&on), received(&off) + 1, "{backend}");
+    let (with, without) = (
+        relation_error(&on.join("trajectory.tum"), &relations),
+        relation_error(&off.join("trajectory.tum"), &relations),
+    );
+    assert!(
+        with < 0.9 * without,
+        "the loops closed made the trajectory {with} m against {without} m without"
+    );
+    assert!(std::fs::read(on.join("map.pgm")).unwrap() != std::fs::read(off.join("map.pgm")).unwrap());
+    for dir in [sim, on, off] {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
 
 /// `squall slam` with K matcher tasks writes byte-identical `trajectory.tum`

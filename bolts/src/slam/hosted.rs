@@ -36,4 +36,5 @@ impl HostedModel for SlamModel {
 /// Registers SLAM as the particle filter kinds' `model = "slam"`.
 pub fn register(r: &mut Registry) {
     register_model::<SlamModel>(r, "slam");
+    r.register_bolt("slam.backend", crate::slam::backend::Backend::from_params);
 }

@@ -4,6 +4,7 @@
 //! filter, and map transfers between processes.
 //! [`hosted`] puts it on the particle filter kinds (`model = "slam"`).
 
+pub mod backend;
 pub mod filter;
 pub mod grid;
 pub(crate) mod hosted;

@@ -1,0 +1,609 @@
+//! The pose-graph back end: loop closures on the best lineage, found by a
+//! wide branch-and-bound search against submaps of its own older scans,
+//! and the trajectory and map bent to fit them (the global SLAM of Hess et
+//! al. 2016, behind GMapping's particle filter as its front end).
+//!
+//! The particle filter closes a loop only where some particle happens to
+//! come back close enough for its matcher to snap onto the old walls; a
+//! loop that comes back further off (odometry whose heading drifts, a long
+//! way round) leaves the map bent and doubled. After the run, the best
+//! lineage is turned into a graph: a node every metre or so, each joined
+//! to the next by the lineage's own motion between them (the chain), and
+//! the nodes grouped into submaps of a few consecutive scans each.
+//!
+//! Walking the nodes in order, each (every `search_every`-th, with enough
+//! points to pin a pose) is matched against the nearest older submaps that
+//! its current estimate lies within `reach` of, over ± `reach` and
+//! ± `turn`. A match whose points fit the submap well becomes a loop
+//! constraint whose information follows the match's own curvature, so a
+//! corridor's match holds the heading and the position across it but
+//! hardly the position along it. A loop that agrees with the poses so far
+//! is added at once; one that disagrees waits for a second match, a few
+//! nodes on, that moves the robot the same way, and then both are added
+//! and the graph is optimized, so that the next searches start from poses
+//! already corrected. At the end the whole graph is optimized, then again
+//! with the loops under a Cauchy loss, so that a loop the others do not
+//! bear out counts for little.
+//!
+//! The result is a correction of what is written, not of the filter: each
+//! scan's pose moves with the nodes around it, and the map is rebuilt from
+//! the nodes' scans along the corrected poses. With no loop found, the
+//! poses are the lineage's, bit for bit. Everything here is a pure function
+//! of the lineage and its scans, so any number of matcher tasks gives the
+//! same result.
+
+mod bolt;
+mod field;
+mod graph;
+mod search;
+
+pub use bolt::Backend;
+
+use serde::{Deserialize, Serialize};
+
+use squall_core::covariance::{Mat3, ZERO, diagonal, mul, transpose};
+use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::sensor::LaserReading;
+
+use field::Field;
+use graph::{Constraint, constraint_chi2, optimize};
+use search::{Window, search};
+
+/// The back end's settings: the params of the `slam.backend` bolt.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BackendOptions {
+    /// Whether loops are closed on the best lineage after the run.
+    pub enabled: bool,
+    /// A node every this many metres of odometry travel...
+    pub node_distance: Real,
+    /// ...or radians of turning.
+    pub node_turn: Real,
+    /// Consecutive nodes per submap.
+    pub submap_nodes: usize,
+    /// Beams used for loop search up to this range, metres.
+    pub range: Real,
+    /// Metres each way the loop search covers around the estimate.
+    pub reach: Real,
+    /// Radians each way the loop search covers.
+    pub turn: Real,
+    /// Least mean field value under a scan's points for a loop.
+    pub min_score: Real,
+    /// A submap is searched only once the path since its last node is
+    /// this long, metres (nearer, the chain already holds it).
+    pub min_loop_path: Real,
+    /// Every this many nodes is searched.
+    pub search_every: usize,
+    /// Cell size of the submaps' fields, metres.
+    pub resolution: Real,
+    /// Beams used up to this range when the map is rebuilt along the
+    /// corrected poses, metres (the matcher's `max_urange`).
+    pub map_range: Real,
+}
+
+impl Default for BackendOptions {
+    fn default() -> Self {
+        BackendOptions {
+            enabled: true,
+            node_distance: 1.0,
+            node_turn: 0.5,
+            submap_nodes: 10,
+            range: 15.0,
+            reach: 2.0,
+            turn: 0.3,
+            min_score: 0.55,
+            min_loop_path: 30.0,
+            search_every: 2,
+            resolution: 0.05,
+            map_range: 80.0,
+        }
+    }
+}
+
+impl BackendOptions {
+    /// Why these settings cannot run, naming the setting.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = [
+            ("node_distance", self.node_distance),
+            ("node_turn", self.node_turn),
+            ("range", self.range),
+            ("reach", self.reach),
+            ("turn", self.turn),
+            ("resolution", self.resolution),
+            ("map_range", self.map_range),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a finite number > 0, got {v}"));
+            }
+        }
+        if !(self.min_loop_path.is_finite() && self.min_loop_path >= 0.0) {
+            return Err(format!("min_loop_path must be a finite number ≥ 0, got {}", self.min_loop_path));
+        }
+        if !(0.0..=1.0).contains(&self.min_score) {
+            return Err(format!("min_score must be in [0, 1], got {}", self.min_score));
+        }
+        if self.submap_nodes == 0 || self.search_every == 0 {
+            return Err("submap_nodes and search_every must be ≥ 1".to_string());
+        }
+        if self.reach / self.resolution > 2000.0 || self.range / self.resolution > 4000.0 {
+            return Err(format!(
+                "reach and range must stay within 2000 and 4000 cells of resolution {} m",
+                self.resolution
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Standard deviation of a loop constraint: the match's precision after
+/// refinement (metres, radians).
+const LOOP_SIGMA: (Real, Real) = (0.05, 0.01);
+
+/// Standard deviation of the chain between two nodes: a fixed part and
+/// a part per metre travelled (metres, radians).
+const CHAIN_SIGMA: (Real, Real) = (0.01, 0.002);
+const CHAIN_SIGMA_PER_METRE: (Real, Real) = (0.02, 0.005);
+
+/// A loop whose squared error at the poses so far is within this (χ² of
+/// three degrees of freedom at 99%) agrees with them and is added at once.
+const CONSISTENT_CHI2: Real = 11.34;
+
+/// A loop that disagrees is added only with a second one, found within
+/// this many searches of its node, that moves the robot the same way.
+const VERIFY_WITHIN: usize = 3;
+
+/// Two corrections agree if they place a node within this of each other
+/// (metres, radians): about five loop standard deviations.
+const AGREE: (Real, Real) = (0.25, 0.05);
+
+/// A node is searched only if its scan has this many points (after
+/// thinning, within `range`): fewer, a few metres of wall, and a match
+/// can slide along them.
+const MIN_POINTS: usize = 80;
+
+/// Submaps searched per node at most, the nearest: in a small building
+/// every node is near many, and the nearest say the most.
+const CANDIDATES_PER_NODE: usize = 3;
+
+/// Submap fields kept built at once.
+const KEPT_FIELDS: usize = 8;
+
+/// Points per scan kept for the search: at most one per cell of this
+/// size, metres.
+const VOXEL: Real = 0.1;
+
+/// Gauss–Newton steps after a loop that disagrees with the poses so far,
+/// and at the end.
+const STEPS_INCREMENTAL: usize = 2;
+const STEPS_FINAL: usize = 10;
+
+/// What the back end found, for the metrics.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct BackendReport {
+    /// Nodes of the graph.
+    pub nodes: usize,
+    /// Submaps.
+    pub submaps: usize,
+    /// Searches run.
+    pub searches: usize,
+    /// Loop constraints added.
+    pub loops: usize,
+    /// Optimizations run.
+    pub optimizations: usize,
+    /// Largest move of a node by the optimization, metres.
+    pub largest_move: Real,
+}
+
+/// A scan kept as a node: its stamp and its points (robot frame).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeScan {
+    /// The scan's stamp.
+    pub stamp: f64,
+    /// Beam end points in the robot's frame, thinned.
+    pub points: Vec<(Real, Real)>,
+}
+
+/// Picks the scans that become nodes, from the readings as they come:
+/// the first, then one whenever the odometry has moved `node_distance` or
+/// turned `node_turn` since the last.
+#[derive(Debug, Clone)]
+pub struct NodePicker {
+    options: BackendOptions,
+    last: Option<Pose2>,
+    nodes: Vec<NodeScan>,
+}
+
+impl NodePicker {
+    /// A picker with `options`.
+    pub fn new(options: BackendOptions) -> Self {
+        NodePicker { options, last: None, nodes: Vec::new() }
+    }
+
+    /// Offers a reading; keeps it if it is due, and says whether it did.
+    pub fn offer(&mut self, scan: &LaserReading) -> bool {
+        if let Some(last) = self.last {
+            let d = scan.odometry.relative_to(&last);
+            if d.x.hypot(d.y) < self.options.node_distance && d.theta.abs() < self.options.node_turn {
+                return false;
+            }
+        }
+        self.last = Some(scan.odometry);
+        self.nodes.push(NodeScan { stamp: scan.stamp, points: thinned_points(scan, self.options.range) });
+        true
+    }
+
+    /// The nodes picked.
+    pub fn into_nodes(self) -> Vec<NodeScan> {
+        self.nodes
+    }
+}
+
+/// The end points of `scan`'s beams up to `range` metres, in the robot's
+/// frame, at most one per `VOXEL` cell.
+fn thinned_points(scan: &LaserReading, range: Real) -> Vec<(Real, Real)> {
+    let mut seen = std::collections::HashSet::new();
+    let mut points = Vec::new();
+    for i in 0..scan.ranges.len() {
+        if !scan.is_valid(i) || Real::from(scan.ranges[i]) > range {
+            continue;
+        }
+        let r = Real::from(scan.ranges[i]);
+        let beam = scan.laser_offset.compose(&Pose2::new(0.0, 0.0, scan.beam_angle(i)));
+        let (s, c) = beam.theta.sin_cos();
+        let (x, y) = (beam.x + c * r, beam.y + s * r);
+        if seen.insert(((x / VOXEL).floor() as i64, (y / VOXEL).floor() as i64)) {
+            points.push((x, y));
+        }
+    }
+    points
+}
+
+/// Submap `k`'s nodes: a run of consecutive ones, and the one it is
+/// anchored to (its middle).
+fn submap_nodes(k: usize, per: usize, nodes: usize) -> (std::ops::Range<usize>, usize) {
+    let range = k * per..((k + 1) * per).min(nodes);
+    let anchor = (range.start + range.end - 1) / 2;
+    (range, anchor)
+}
+
+/// The poses of `trajectory` (stamp, pose: every scan, oldest first)
+/// corrected by the loops closed between `nodes`, and what was found.
+/// Nodes whose stamp is not in the trajectory are left out.
+pub fn close_loops(
+    trajectory: &[(f64, Pose2)],
+    nodes: &[NodeScan],
+    options: &BackendOptions,
+) -> (Vec<(f64, Pose2)>, BackendReport) {
+    let mut report = BackendReport::default();
+    // Each node's index in the trajectory.
+    let mut at = Vec::with_capacity(nodes.len());
+    let mut kept = Vec::with_capacity(nodes.len());
+    let mut i = 0;
+    for node in nodes {
+        while i < trajectory.len() && trajectory[i].0 < node.stamp {
+            i += 1;
+        }
+        if i < trajectory.len() && trajectory[i].0 == node.stamp && !node.points.is_empty() {
+            at.push(i);
+            kept.push(node);
+        }
+    }
+    let n = kept.len();
+    report.nodes = n;
+    if !options.enabled || n < 2 * options.submap_nodes.max(1) {
+        return (trajectory.to_vec(), report);
+    }
+    let front: Vec<Pose2> = at.iter().map(|&i| trajectory[i].1).collect();
+    // Path length along the lineage at each node.
+    let mut path = vec![0.0; n];
+    for k in 1..n {
+        path[k] = path[k - 1] + front[k].distance(&front[k - 1]);
+    }
+    let mut constraints: Vec<Constraint> = (1..n)
+        .map(|k| {
+            let measured = front[k].relative_to(&front[k - 1]);
+            let metres = measured.x.hypot(measured.y);
+            let sxy = CHAIN_SIGMA.0 + CHAIN_SIGMA_PER_METRE.0 * metres;
+            let st = CHAIN_SIGMA.1 + CHAIN_SIGMA_PER_METRE.1 * (metres + measured.theta.abs());
+            Constraint {
+                from: k - 1,
+                to: k,
+                measured,
+                information: diagonal([1.0 / (sxy * sxy), 1.0 / (sxy * sxy), 1.0 / (st * st)]),
+                robust: false,
+            }
+        })
+        .collect();
+    let per = options.submap_nodes.max(1);
+    let submaps = n.div_ceil(per);
+    report.submaps = submaps;
+    let mut estimate = front.clone();
+    let mut fields: Vec<Option<Field>> = vec![None; submaps];
+    let mut built_order: Vec<usize> = Vec::new();
+    // A match that disagrees with the poses so far, waiting for a second
+    // one that implies the same correction: (its constraint, its node, the
+    // correction).
+    let mut pending: Option<(Constraint, usize, Pose2)> = None;
+    let (reach, turn) = (options.reach, options.turn);
+    for j in (0..n).step_by(options.search_every.max(1)) {
+        if kept[j].points.len() < MIN_POINTS {
+            continue;
+        }
+        let mut disagrees = false;
+        // The old enough submaps near node j, nearest first.
+        let mut candidates: Vec<(Real, usize)> = (0..submaps)
+            .filter_map(|s| {
+                let (members, _) = submap_nodes(s, per, n);
+                if members.end > j || path[j] - path[members.end - 1] < options.min_loop_path {
+                    return None;
+                }
+                let nearest =
+                    members.map(|m| estimate[m].distance(&estimate[j])).fold(Real::INFINITY, Real::min);
+                (nearest <= reach).then_some((nearest, s))
+            })
+            .collect();
+        candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        candidates.truncate(CANDIDATES_PER_NODE);
+        for &(_, s) in &candidates {
+            let (members, anchor) = submap_nodes(s, per, n);
+            let field = fields[s].get_or_insert_with(|| {
+                built_order.push(s);
+                build_field(&kept, &front, members.clone(), anchor, options)
+            });
+            let window = Window { around: estimate[j].relative_to(&estimate[anchor]), reach, turn };
+            report.searches += 1;
+            let Some(found) = search(field, &kept[j].points, window, options.min_score) else { continue };
+            let information = loop_information(&found.curvature, &found.pose);
+            let c = Constraint { from: anchor, to: j, measured: found.pose, information, robust: false };
+            if constraint_chi2(&c, &estimate) <= CONSISTENT_CHI2 {
+                constraints.push(c);
+                report.loops += 1;
+                continue;
+            }
+            // Where this match would put node j, as a motion of the world.
+            let correction = estimate[anchor].compose(&found.pose).compose(&estimate[j].inverse());
+            match pending.take() {
+                Some((first, at_node, earlier))
+                    if j - at_node <= VERIFY_WITHIN * options.search_every
+                        && agree(&earlier, &correction, &estimate[j]) =>
+                {
+                    constraints.extend([first, c]);
+                    report.loops += 2;
+                    disagrees = true;
+                }
+                _ => pending = Some((c, j, correction)),
+            }
+        }
+        // Keep a few fields: the robot tends to come back to the same ones.
+        while built_order.len() > KEPT_FIELDS {
+            let old = built_order.remove(0);
+            fields[old] = None;
+        }
+        if disagrees {
+            let prefix: Vec<Constraint> =
+                constraints.iter().filter(|c| c.from.max(c.to) <= j).copied().collect();
+            let before = estimate[j];
+            optimize(&mut estimate[..=j], &prefix, STEPS_INCREMENTAL);
+            report.optimizations += 1;
+            // The nodes not yet in the graph follow node j rigidly.
+            let moved = estimate[j].compose(&before.inverse());
+            for e in &mut estimate[j + 1..] {
+                *e = moved.compose(e);
+            }
+        }
+    }
+    if report.loops == 0 {
+        return (trajectory.to_vec(), report);
+    }
+    optimize(&mut estimate, &constraints, STEPS_FINAL);
+    // Then again with the loops under the robust loss, so that a loop the
+    // others do not bear out counts for little.
+    for c in constraints.iter_mut().filter(|c| c.to != c.from + 1) {
+        c.robust = true;
+    }
+    optimize(&mut estimate, &constraints, STEPS_FINAL);
+    report.optimizations += 2;
+    report.largest_move = estimate.iter().zip(&front).map(|(e, f)| e.distance(f)).fold(0.0, Real::max);
+    (apply_corrections(trajectory, &at, &front, &estimate), report)
+}
+
+/// The field of submap `members`, in `anchor`'s frame, placed by the
+/// lineage's own poses.
+fn build_field(
+    nodes: &[&NodeScan],
+    front: &[Pose2],
+    members: std::ops::Range<usize>,
+    anchor: usize,
+    options: &BackendOptions,
+) -> Field {
+    let mut points = Vec::new();
+    for m in members {
+        let local = front[m].relative_to(&front[anchor]);
+        let (s, c) = local.theta.sin_cos();
+        points
+            .extend(nodes[m].points.iter().map(|&(x, y)| (local.x + c * x - s * y, local.y + s * x + c * y)));
+    }
+    let depth = ((options.reach / options.resolution).log2().ceil() as usize).clamp(1, 6);
+    Field::build(&points, options.resolution, options.resolution, depth, options.reach)
+}
+
+/// A loop's information, shaped by the match's `curvature` (in the
+/// submap's frame) and scaled so that its best-pinned position direction
+/// and its heading have the standard deviations of `LOOP_SIGMA`: a match
+/// in a corridor holds the heading and the position across it, and
+/// barely the position along it (degeneracy-aware, after Zhang, Kaess and
+/// Singh 2016). The constraint's error is taken in the frame of the
+/// measured pose, so the position block is rotated into it.
+fn loop_information(curvature: &Mat3, measured: &Pose2) -> Mat3 {
+    let (a, b, c) = (curvature[0][0], curvature[0][1], curvature[1][1]);
+    let largest = 0.5 * (a + c) + (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let turning = curvature[2][2];
+    if !(largest > 0.0 && turning > 0.0) {
+        return ZERO;
+    }
+    let scale = [
+        1.0 / (LOOP_SIGMA.0 * largest.sqrt()),
+        1.0 / (LOOP_SIGMA.0 * largest.sqrt()),
+        1.0 / (LOOP_SIGMA.1 * turning.sqrt()),
+    ];
+    let shaped: Mat3 =
+        std::array::from_fn(|i| std::array::from_fn(|k| curvature[i][k] * scale[i] * scale[k]));
+    // Into the measured pose's frame: Rᵀ on the position block.
+    let (s, co) = measured.theta.sin_cos();
+    let rotation = [[co, -s, 0.0], [s, co, 0.0], [0.0, 0.0, 1.0]];
+    mul(&transpose(&rotation), &mul(&shaped, &rotation))
+}
+
+/// Whether the corrections `a` and `b` (motions of the world) put `node`
+/// in the same place.
+fn agree(a: &Pose2, b: &Pose2, node: &Pose2) -> bool {
+    let (pa, pb) = (a.compose(node), b.compose(node));
+    pa.distance(&pb) <= AGREE.0 && normalize_angle(pa.theta - pb.theta).abs() <= AGREE.1
+}
+
+/// Every pose of `trajectory` moved with its nodes: between two nodes, the
+/// two nodes' corrections applied and blended by the path travelled.
+fn apply_corrections(
+    trajectory: &[(f64, Pose2)],
+    at: &[usize],
+    front: &[Pose2],
+    corrected: &[Pose2],
+) -> Vec<(f64, Pose2)> {
+    let corrections: Vec<Pose2> = corrected.iter().zip(front).map(|(c, f)| c.compose(&f.inverse())).collect();
+    let mut along = vec![0.0; trajectory.len()];
+    for i in 1..trajectory.len() {
+        along[i] = along[i - 1] + trajectory[i].1.distance(&trajectory[i - 1].1);
+    }
+    let mut k = 0;
+    trajectory
+        .iter()
+        .enumerate()
+        .map(|(i, &(stamp, pose))| {
+            while k + 1 < at.len() && at[k + 1] <= i {
+                k += 1;
+            }
+            let a = corrections[k].compose(&pose);
+            if i <= at[k] || k + 1 == at.len() {
+                return (stamp, a);
+            }
+            let b = corrections[k + 1].compose(&pose);
+            let span = along[at[k + 1]] - along[at[k]];
+            let f = if span > 0.0 { (along[i] - along[at[k]]) / span } else { 0.0 };
+            let blended = Pose2::new(
+                a.x + f * (b.x - a.x),
+                a.y + f * (b.y - a.y),
+                a.theta + f * normalize_angle(b.theta - a.theta),
+            );
+            (stamp, blended)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::slam::scenes::scan_of;
+    use squall_core::linemap::LineMap;
+
+    /// A loop corridor 4 m wide around a 16 × 8 m block, with pillars and
+    /// door recesses so that no stretch of it is featureless.
+    fn corridor() -> LineMap {
+        let mut lines = String::from(
+            "0,0,24,0\n24,0,24,16\n24,16,0,16\n0,16,0,0\n4,4,20,4\n20,4,20,12\n20,12,4,12\n4,12,4,4\n",
+        );
+        for &(x, y) in &[(7.0, 1.0), (13.0, 3.0), (22.5, 7.0), (16.0, 13.5), (9.0, 15.0), (1.5, 9.0)] {
+            let s = 0.4;
+            lines += &format!("{x},{y},{},{y}\n{},{y},{},{}\n", x + s, x + s, x + s, y + s);
+        }
+        LineMap::parse("corridor", &lines).unwrap()
+    }
+
+    /// The true path: around the corridor's middle once, then 12 m more,
+    /// a scan every 0.25 m.
+    fn truth() -> Vec<Pose2> {
+        let corners = [(2.0, 2.0), (22.0, 2.0), (22.0, 14.0), (2.0, 14.0), (2.0, 2.0), (14.0, 2.0)];
+        let mut poses = Vec::new();
+        for w in corners.windows(2) {
+            let ((x0, y0), (x1, y1)): ((Real, Real), (Real, Real)) = (w[0], w[1]);
+            let heading = (y1 - y0).atan2(x1 - x0);
+            let steps = ((x1 - x0).hypot(y1 - y0) / 0.25).round() as usize;
+            for k in 0..steps {
+                let f = k as Real / steps as Real;
+                poses.push(Pose2::new(x0 + f * (x1 - x0), y0 + f * (y1 - y0), heading));
+            }
+        }
+        poses
+    }
+
+    /// The truth as a front end that drifts in heading by `per_step`
+    /// radians a scan would report it.
+    fn drifting(truth: &[Pose2], per_step: Real) -> Vec<Pose2> {
+        let mut out = vec![truth[0]];
+        for (k, w) in truth.windows(2).enumerate() {
+            let step = w[1].relative_to(&w[0]);
+            let bent = Pose2::new(step.x, step.y, step.theta + per_step * (k % 3) as Real);
+            out.push(out[k].compose(&bent));
+        }
+        out
+    }
+
+    /// Runs the back end on scans of `truth` placed by `front`.
+    fn run(truth: &[Pose2], front: &[Pose2], options: &BackendOptions) -> (Vec<(f64, Pose2)>, BackendReport) {
+        let world = corridor();
+        let mut picker = NodePicker::new(*options);
+        for (k, (t, f)) in truth.iter().zip(front).enumerate() {
+            let mut scan = scan_of(&world, t);
+            scan.stamp = k as f64;
+            scan.odometry = *f;
+            picker.offer(&scan);
+        }
+        let trajectory: Vec<(f64, Pose2)> = front.iter().enumerate().map(|(k, p)| (k as f64, *p)).collect();
+        close_loops(&trajectory, &picker.into_nodes(), options)
+    }
+
+    fn mean_error(poses: &[(f64, Pose2)], truth: &[Pose2]) -> Real {
+        poses.iter().zip(truth).map(|(p, t)| p.1.distance(t)).sum::<Real>() / truth.len() as Real
+    }
+
+    #[test]
+    fn a_loop_that_comes_back_off_is_closed() {
+        let truth = truth();
+        let front = drifting(&truth, 0.0012);
+        let before = mean_error(&front.iter().map(|p| (0.0, *p)).collect::<Vec<_>>(), &truth);
+        let closing = front.last().unwrap().distance(truth.last().unwrap());
+        assert!(closing > 0.5, "the front end comes back {closing} m off");
+        let (poses, report) = run(&truth, &front, &BackendOptions::default());
+        assert!(report.loops >= 2, "{report:?}");
+        let after = mean_error(&poses, &truth);
+        let closing_after = poses.last().unwrap().1.distance(truth.last().unwrap());
+        assert!(after < 0.5 * before, "mean error {before} -> {after} m ({report:?})");
+        assert!(closing_after < 0.2 * closing, "end {closing} -> {closing_after} m");
+    }
+
+    #[test]
+    fn without_a_loop_the_poses_stay_bit_for_bit() {
+        let truth = truth();
+        let front = drifting(&truth, 0.0012);
+        // A path shorter than a loop: only the first 40 m.
+        let (truth, front) = (&truth[..160], &front[..160]);
+        let (poses, report) = run(truth, front, &BackendOptions::default());
+        assert_eq!(report.loops, 0);
+        assert!(poses.iter().zip(front).all(|(p, f)| p.1 == *f));
+        // And switched off, nothing is searched.
+        let off = BackendOptions { enabled: false, ..BackendOptions::default() };
+        let (_, report) = run(truth, front, &off);
+        assert_eq!(report.searches, 0);
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        let e = BackendOptions { reach: 0.0, ..BackendOptions::default() }.check().unwrap_err();
+        assert!(e.contains("reach"), "{e}");
+        let e = BackendOptions { min_score: 1.5, ..BackendOptions::default() }.check().unwrap_err();
+        assert!(e.contains("min_score"), "{e}");
+        let e = BackendOptions { resolution: 1e-6, ..BackendOptions::default() }.check().unwrap_err();
+        assert!(e.contains("cells"), "{e}");
+        assert!(BackendOptions::default().check().is_ok());
+    }
+}
