@@ -18,8 +18,10 @@
 //! constraint whose information follows the match's own curvature, so a
 //! corridor's match holds the heading and the position across it but
 //! hardly the position along it. A loop that agrees with the poses so far
-//! is added at once; one that disagrees waits for a second match, a few
-//! nodes on, that moves the robot the same way, and then both are added
+//! is added at once. One that disagrees is dropped if the scan scores a
+//! pose that agrees nearly as well (repeated doors or rooms), and otherwise
+//! waits for a second match, a few nodes on, that moves the robot the same
+//! way; then both are added
 //! and the graph is optimized, so that the next searches start from poses
 //! already corrected. At the end the whole graph is optimized, then again
 //! with the loops under a Cauchy loss, so that a loop the others do not
@@ -356,9 +358,19 @@ pub fn close_loops(
             let Some(found) = search(field, &kept[j].points, window, options.min_score) else { continue };
             let information = loop_information(&found.curvature, &found.pose);
             let c = Constraint { from: anchor, to: j, measured: found.pose, information, robust: false };
-            if constraint_chi2(&c, &estimate) <= CONSISTENT_CHI2 {
+            let disagreement = constraint_chi2(&c, &estimate);
+            if disagreement <= CONSISTENT_CHI2 {
                 constraints.push(c);
                 report.loops += 1;
+                continue;
+            }
+            // Where the scan scores a pose that agrees with the poses so far
+            // nearly as well (doors or rooms alike), it gives no reason to
+            // move them.
+            let rival_agrees = |rival: Pose2| {
+                constraint_chi2(&Constraint { measured: rival, ..c }, &estimate) <= CONSISTENT_CHI2
+            };
+            if found.rival.is_some_and(rival_agrees) {
                 continue;
             }
             // Where this match would put node j, as a motion of the world.

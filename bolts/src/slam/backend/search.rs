@@ -19,6 +19,10 @@ pub(crate) struct Found {
     /// respect to (x, y, θ) in the submap's frame: how sharply each
     /// direction is pinned (a corridor's axis hardly at all).
     pub curvature: Mat3,
+    /// A pose away from it (0.5 m or 0.1 rad) that scores within 90% of
+    /// it, if any: a ridge (a corridor's axis) or repeated structure
+    /// (doors, rooms alike), where the match may be the wrong copy.
+    pub rival: Option<Pose2>,
 }
 
 /// Where to look: around `around`, up to `reach` metres and `turn`
@@ -35,6 +39,28 @@ pub(crate) struct Window {
 
 /// Points the branch and bound scores at most.
 const BRANCH_POINTS: usize = 80;
+
+/// A rival pose at least this far from the best (metres, radians)...
+const UNIQUE_APART: (Real, Real) = (0.5, 0.1);
+
+/// ...that scores this fraction of the best makes the match ambiguous.
+const UNIQUE_RATIO: Real = 0.9;
+
+/// The leaves far enough from `best` to be its rivals.
+#[derive(Debug, Clone, Copy)]
+struct Apart {
+    best: Candidate,
+    cells: i64,
+    headings: usize,
+}
+
+impl Apart {
+    /// Whether `c` is away from the best in position or heading.
+    fn holds(&self, c: &Candidate) -> bool {
+        let (dx, dy) = (c.offset.0 - self.best.offset.0, c.offset.1 - self.best.offset.1);
+        dx * dx + dy * dy >= self.cells * self.cells || c.heading.abs_diff(self.best.heading) >= self.headings
+    }
+}
 
 /// A candidate: a heading, a cell offset and the level whose square of
 /// offsets it stands for, with its bound (sum of byte values).
@@ -107,26 +133,47 @@ pub(crate) fn search(
         }
     }
     let threshold = (min_score * FULL * coarse_points.len() as Real).ceil() as u32;
+    let mut rivals = roots.clone();
     let mut best: Option<Candidate> = None;
     let mut best_bound = threshold.saturating_sub(1);
-    descend(&mut roots, reach_cells, &bound, &mut best, &mut best_bound);
+    descend(&mut roots, reach_cells, &bound, None, &mut best, &mut best_bound);
     let best = best?;
+    // A rival: a pose away from the best (beyond a few cells or heading
+    // steps) that scores nearly as well, as in a corridor whose doors
+    // repeat or among rooms alike.
+    let apart = Apart {
+        best,
+        cells: (UNIQUE_APART.0 / r).ceil() as i64,
+        headings: (UNIQUE_APART.1 / step).ceil() as usize,
+    };
+    let mut rival: Option<Candidate> = None;
+    let mut rival_bound = ((UNIQUE_RATIO * Real::from(best.bound)).ceil() as u32).saturating_sub(1);
+    descend(&mut rivals, reach_cells, &bound, Some(&apart), &mut rival, &mut rival_bound);
     let (theta, _) = headings[best.heading];
     let coarse = Pose2::new(
         window.around.x + best.offset.0 as Real * r,
         window.around.y + best.offset.1 as Real * r,
         theta,
     );
-    let refined = refine(field, points, coarse);
+    let rival = rival.map(|c| {
+        Pose2::new(
+            window.around.x + c.offset.0 as Real * r,
+            window.around.y + c.offset.1 as Real * r,
+            headings[c.heading].0,
+        )
+    });
+    let refined = Found { rival, ..refine(field, points, coarse) };
     (refined.score >= min_score).then_some(refined)
 }
 
 /// Depth-first over `candidates`, best bound first, pruning every branch
-/// whose bound cannot beat the best leaf found.
+/// whose bound cannot beat the best leaf found; leaves `excluded` holds
+/// not are skipped.
 fn descend(
     candidates: &mut [Candidate],
     reach: i64,
     bound: &impl Fn(&Candidate) -> u32,
+    excluded: Option<&Apart>,
     best: &mut Option<Candidate>,
     best_bound: &mut u32,
 ) {
@@ -136,6 +183,9 @@ fn descend(
             return;
         }
         if c.level == 0 {
+            if excluded.is_some_and(|e| !e.holds(c)) {
+                continue;
+            }
             *best = Some(*c);
             *best_bound = c.bound;
             continue;
@@ -151,7 +201,7 @@ fn descend(
                 child
             })
             .collect();
-        descend(&mut children, reach, bound, best, best_bound);
+        descend(&mut children, reach, bound, excluded, best, best_bound);
     }
 }
 
@@ -210,7 +260,7 @@ fn refine(field: &Field, points: &[(Real, Real)], start: Pose2) -> Found {
         }
     }
     let (curvature, _) = normal_equations(field, points, &best.0);
-    Found { pose: best.0, score: best.1, curvature }
+    Found { pose: best.0, score: best.1, curvature, rival: None }
 }
 
 #[cfg(test)]
@@ -250,8 +300,34 @@ mod tests {
         assert!(found.pose.distance(&truth) < 0.02, "{:?}", found.pose);
         assert!((found.pose.theta - truth.theta).abs() < 0.005, "{:?}", found.pose);
         assert!(found.score > 0.8, "{}", found.score);
+        assert!(found.rival.is_none(), "the room's corner has no double: {:?}", found.rival);
         // A window that does not hold the truth finds no match that good.
         let elsewhere = Window { around: Pose2::new(-3.0, -3.0, 2.0), reach: 0.5, turn: 0.1 };
         assert!(search(&field, &points, elsewhere, 0.5).is_none());
+    }
+
+    #[test]
+    fn repeated_structure_has_a_rival() {
+        // A wall with a post every metre: seen from close by, one stretch
+        // of it looks like the next.
+        let mut map = Vec::new();
+        for i in 0..600 {
+            let x = i as Real * 0.02;
+            map.push((x, 0.0));
+            if i % 50 < 5 {
+                map.push((x, 0.1));
+            }
+        }
+        let field = Field::build(&map, 0.05, 0.05, 5, 2.5);
+        let truth = Pose2::new(6.0, 1.0, 0.0);
+        let points: Vec<(Real, Real)> = map
+            .iter()
+            .filter(|p| (p.0 - truth.x).abs() < 1.2)
+            .map(|&(x, y)| (x - truth.x, y - truth.y))
+            .collect();
+        let found =
+            search(&field, &points, Window { around: truth, reach: 1.5, turn: 0.1 }, 0.3).expect("a match");
+        let rival = found.rival.expect("a post a metre on");
+        assert!((rival.x - found.pose.x).abs() > 0.5, "{rival:?} against {:?}", found.pose);
     }
 }
