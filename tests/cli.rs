@@ -10,7 +10,7 @@ use squall::builtin::wordcount::SentenceGen;
 
 mod common;
 
-use common::{LOG_PROGRESS, finish_within, logged_progress, wait_for};
+use common::{LOG_PROGRESS, finish_within, logged_progress, relation_error, wait_for};
 
 fn squall(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_squall"))
@@ -575,22 +575,6 @@ fn slam_on_the_simulator_and_its_argument_checks() {
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("cutoff"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// The relation error (m) of the trajectory file `trajectory` against
-/// `relations`, as `squall eval --json` reports it.
-fn relation_error(trajectory: &Path, relations: &Path) -> f64 {
-    let out = squall(&[
-        "eval",
-        "--trajectory",
-        trajectory.to_str().unwrap(),
-        "--relations",
-        relations.to_str().unwrap(),
-        "--json",
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
-    v["trans_mean"].as_f64().unwrap_or_else(|| panic!("{v}"))
 }
 
 #[test]

@@ -12,7 +12,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 use common::cluster::Workers;
-use common::{LOG_PROGRESS, finish_within, logged_progress, output_within, wait_for};
+use common::{LOG_PROGRESS, finish_within, logged_progress, output_within, relation_error, wait_for};
 
 /// How long any one run may take before the test fails as hung: the
 /// longest (the whole ACES log) takes 12–20 s here.
@@ -306,18 +306,10 @@ fn a_killed_coordinator_leaves_no_worker_running() {
 
 /// The ACES relations metric of a trajectory: mean translational error.
 fn aces_error(trajectory: &Path) -> f64 {
-    let relations = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.relations");
-    let out = squall(&[
-        "eval",
-        "--trajectory",
-        trajectory.to_str().unwrap(),
-        "--relations",
-        relations.to_str().unwrap(),
-        "--json",
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    report["trans_mean"].as_f64().unwrap_or_else(|| panic!("{report}"))
+    relation_error(
+        trajectory,
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/laser/aces.relations"),
+    )
 }
 
 #[test]

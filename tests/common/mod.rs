@@ -108,3 +108,19 @@ pub(crate) fn logged_progress(stderr: &str) -> Option<u64> {
         .filter_map(|(before, _)| before.rsplit(' ').next()?.parse().ok())
         .max()
 }
+
+/// The relation error (m) of the trajectory file `trajectory` against
+/// `relations`, as `squall eval --json` reports it.
+pub(crate) fn relation_error(trajectory: &std::path::Path, relations: &std::path::Path) -> f64 {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["eval", "--trajectory"])
+        .arg(trajectory)
+        .arg("--relations")
+        .arg(relations)
+        .arg("--json")
+        .output()
+        .expect("squall eval runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    report["trans_mean"].as_f64().unwrap_or_else(|| panic!("{report}"))
+}
