@@ -118,7 +118,7 @@ fn expected_noise_along(scans: &[(f64, Pose2)], noise: NoiseWeights) -> Vec<Real
 
 /// `a` moved the fraction `f` of the way to `b` (the heading the short way
 /// round).
-fn blend(a: &Pose2, b: &Pose2, f: Real) -> Pose2 {
+pub(crate) fn blend(a: &Pose2, b: &Pose2, f: Real) -> Pose2 {
     Pose2::new(a.x + f * (b.x - a.x), a.y + f * (b.y - a.y), a.theta + f * normalize_angle(b.theta - a.theta))
 }
 

@@ -22,9 +22,8 @@ use crate::slam::integrate::integrate_scan;
 #[derive(Debug)]
 pub struct Backend {
     options: BackendOptions,
-    picker: Option<NodePicker>,
-    /// The readings kept as nodes, for rebuilding the map.
-    readings: Vec<LaserReading>,
+    /// The readings kept as nodes.
+    picker: NodePicker,
     trajectory: Vec<(f64, Pose2)>,
     /// Cell size of the matcher's maps, once one has passed.
     resolution: Option<f64>,
@@ -38,13 +37,7 @@ impl Backend {
         if p.parallelism() != 1 {
             return Err(ParamError::new("slam.backend sees the whole lineage: use parallelism 1"));
         }
-        Ok(Backend {
-            options,
-            picker: Some(NodePicker::new(options)),
-            readings: Vec::new(),
-            trajectory: Vec::new(),
-            resolution: None,
-        })
+        Ok(Backend { options, picker: NodePicker::new(options), trajectory: Vec::new(), resolution: None })
     }
 
     /// The map along `poses` (every scan's), from the readings kept, at
@@ -52,7 +45,7 @@ impl Backend {
     fn rebuilt_map(&self, poses: &[(f64, Pose2)], resolution: f64) -> Result<OccupancyGrid, BoxError> {
         let mut grid = TiledGrid::new(resolution, (0.0, 0.0))?;
         let mut k = 0;
-        for reading in &self.readings {
+        for reading in self.picker.readings() {
             while k < poses.len() && poses[k].0 < reading.stamp {
                 k += 1;
             }
@@ -79,11 +72,7 @@ impl Bolt for Backend {
         if let Some(p) = input.get::<PoseStamped>() {
             self.trajectory.push((p.stamp, p.pose));
         } else if let Some(scan) = input.get::<LaserReading>() {
-            if let Some(picker) = &mut self.picker
-                && picker.offer(scan)
-            {
-                self.readings.push(scan.clone());
-            }
+            self.picker.offer(scan);
         } else {
             // Maps pass through as they come (a viewer sees the map grow);
             // the last one's cell size is the rebuilt map's.
@@ -97,8 +86,8 @@ impl Bolt for Backend {
     }
 
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
-        let nodes = self.picker.take().map(NodePicker::into_nodes).unwrap_or_default();
         let started = std::time::Instant::now();
+        let nodes = self.picker.nodes();
         let (poses, report) = close_loops(&self.trajectory, &nodes, &self.options);
         out.record("close_loops_ms", started.elapsed().as_millis() as u64);
         out.count("nodes", report.nodes as u64);
@@ -116,7 +105,7 @@ impl Bolt for Backend {
             out.record("map_rebuild_ms", started.elapsed().as_millis() as u64);
             out.emit("map", rebuilt).await?;
         }
-        self.readings = Vec::new();
+        self.picker = NodePicker::new(self.options);
         for (stamp, pose) in poses {
             out.emit("trajectory", PoseStamped { stamp, pose }).await?;
         }

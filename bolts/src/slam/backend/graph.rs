@@ -11,7 +11,7 @@
 //! for L loops in exact arithmetic, and in far fewer in practice: a sparse
 //! direct solver's fill-in is not needed for a chain with a few chords.
 
-use squall_core::covariance::{Mat3, ZERO, add, apply, inverse, mul, transpose};
+use squall_core::covariance::{Mat3, ZERO, add, apply, inverse, mul, scale, transpose};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 
 /// A relative-pose constraint: node `to` seen from node `from` is
@@ -122,7 +122,7 @@ impl Tridiagonal {
                 // Sᵢ = Aᵢ − Bᵢ₋₁ᵀ Sᵢ₋₁⁻¹ Bᵢ₋₁.
                 Some((s_inv, b)) => {
                     let correction = mul(&transpose(&b), &mul(&s_inv, &b));
-                    add(d, &correction.map(|r| r.map(|x| -x)))
+                    add(d, &scale(&correction, -1.0))
                 }
                 None => *d,
             };
@@ -196,7 +196,7 @@ fn linearize(poses: &[Pose2], constraints: &[Constraint]) -> Option<Normal> {
         let (i, j) = (c.from, c.to);
         let (e, ja, jb) = error_and_jacobians(c, &poses[i], &poses[j]);
         let weight = if c.robust { cauchy(chi2(&c.information, &e)) } else { 1.0 };
-        let omega = c.information.map(|r| r.map(|x| x * weight));
+        let omega = scale(&c.information, weight);
         let (jat, jbt) = (transpose(&ja), transpose(&jb));
         let (ja_o, jb_o) = (mul(&jat, &omega), mul(&jbt, &omega));
         normal.diagonal[i] = add(&normal.diagonal[i], &mul(&ja_o, &ja));

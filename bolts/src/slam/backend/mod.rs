@@ -47,9 +47,10 @@ use squall_core::covariance::{Mat3, ZERO, diagonal, mul, transpose};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 use squall_core::sensor::LaserReading;
 
+use crate::pf::trajectory::blend;
 use field::Field;
 use graph::{Constraint, constraint_chi2, optimize};
-use search::{Window, search};
+use search::{Found, Window, search};
 
 /// The back end's settings: the params of the `slam.backend` bolt.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -185,8 +186,6 @@ const STEPS_FINAL: usize = 10;
 pub struct BackendReport {
     /// Nodes of the graph.
     pub nodes: usize,
-    /// Submaps.
-    pub submaps: usize,
     /// Searches run.
     pub searches: usize,
     /// Loop constraints added.
@@ -208,36 +207,44 @@ pub struct NodeScan {
 
 /// Picks the scans that become nodes, from the readings as they come:
 /// the first, then one whenever the odometry has moved `node_distance` or
-/// turned `node_turn` since the last.
+/// turned `node_turn` since the last. It keeps the readings whole, for
+/// the map rebuilt at the end.
 #[derive(Debug, Clone)]
 pub struct NodePicker {
     options: BackendOptions,
     last: Option<Pose2>,
-    nodes: Vec<NodeScan>,
+    readings: Vec<LaserReading>,
 }
 
 impl NodePicker {
     /// A picker with `options`.
     pub fn new(options: BackendOptions) -> Self {
-        NodePicker { options, last: None, nodes: Vec::new() }
+        NodePicker { options, last: None, readings: Vec::new() }
     }
 
-    /// Offers a reading; keeps it if it is due, and says whether it did.
-    pub fn offer(&mut self, scan: &LaserReading) -> bool {
+    /// Offers a reading; keeps it if it is due.
+    pub fn offer(&mut self, scan: &LaserReading) {
         if let Some(last) = self.last {
             let d = scan.odometry.relative_to(&last);
             if d.x.hypot(d.y) < self.options.node_distance && d.theta.abs() < self.options.node_turn {
-                return false;
+                return;
             }
         }
         self.last = Some(scan.odometry);
-        self.nodes.push(NodeScan { stamp: scan.stamp, points: thinned_points(scan, self.options.range) });
-        true
+        self.readings.push(scan.clone());
     }
 
-    /// The nodes picked.
-    pub fn into_nodes(self) -> Vec<NodeScan> {
-        self.nodes
+    /// The readings kept, oldest first.
+    pub fn readings(&self) -> &[LaserReading] {
+        &self.readings
+    }
+
+    /// The nodes: each kept reading's stamp and thinned points.
+    pub fn nodes(&self) -> Vec<NodeScan> {
+        self.readings
+            .iter()
+            .map(|r| NodeScan { stamp: r.stamp, points: thinned_points(r, self.options.range) })
+            .collect()
     }
 }
 
@@ -319,7 +326,6 @@ pub fn close_loops(
         .collect();
     let per = options.submap_nodes.max(1);
     let submaps = n.div_ceil(per);
-    report.submaps = submaps;
     let mut estimate = front.clone();
     let mut fields: Vec<Option<Field>> = vec![None; submaps];
     let mut built_order: Vec<usize> = Vec::new();
@@ -355,11 +361,20 @@ pub fn close_loops(
             });
             let window = Window { around: estimate[j].relative_to(&estimate[anchor]), reach, turn };
             report.searches += 1;
-            let Some(found) = search(field, &kept[j].points, window, options.min_score) else { continue };
-            let information = loop_information(&found.curvature, &found.pose);
-            let c = Constraint { from: anchor, to: j, measured: found.pose, information, robust: false };
-            let disagreement = constraint_chi2(&c, &estimate);
-            if disagreement <= CONSISTENT_CHI2 {
+            let constraint = |found: &Found| Constraint {
+                from: anchor,
+                to: j,
+                measured: found.pose,
+                information: loop_information(&found.curvature, &found.pose),
+                robust: false,
+            };
+            // The rival matters only to a match that would move the poses.
+            let moves = |found: &Found| constraint_chi2(&constraint(found), &estimate) > CONSISTENT_CHI2;
+            let Some(found) = search(field, &kept[j].points, window, options.min_score, moves) else {
+                continue;
+            };
+            let c = constraint(&found);
+            if constraint_chi2(&c, &estimate) <= CONSISTENT_CHI2 {
                 constraints.push(c);
                 report.loops += 1;
                 continue;
@@ -454,13 +469,12 @@ fn loop_information(curvature: &Mat3, measured: &Pose2) -> Mat3 {
     if !(largest > 0.0 && turning > 0.0) {
         return ZERO;
     }
-    let scale = [
+    let scale = diagonal([
         1.0 / (LOOP_SIGMA.0 * largest.sqrt()),
         1.0 / (LOOP_SIGMA.0 * largest.sqrt()),
         1.0 / (LOOP_SIGMA.1 * turning.sqrt()),
-    ];
-    let shaped: Mat3 =
-        std::array::from_fn(|i| std::array::from_fn(|k| curvature[i][k] * scale[i] * scale[k]));
+    ]);
+    let shaped = mul(&mul(&scale, curvature), &scale);
     // Into the measured pose's frame: Rᵀ on the position block.
     let (s, co) = measured.theta.sin_cos();
     let rotation = [[co, -s, 0.0], [s, co, 0.0], [0.0, 0.0, 1.0]];
@@ -502,12 +516,7 @@ fn apply_corrections(
             let b = corrections[k + 1].compose(&pose);
             let span = along[at[k + 1]] - along[at[k]];
             let f = if span > 0.0 { (along[i] - along[at[k]]) / span } else { 0.0 };
-            let blended = Pose2::new(
-                a.x + f * (b.x - a.x),
-                a.y + f * (b.y - a.y),
-                a.theta + f * normalize_angle(b.theta - a.theta),
-            );
-            (stamp, blended)
+            (stamp, blend(&a, &b, f))
         })
         .collect()
 }
@@ -571,7 +580,7 @@ mod tests {
             picker.offer(&scan);
         }
         let trajectory: Vec<(f64, Pose2)> = front.iter().enumerate().map(|(k, p)| (k as f64, *p)).collect();
-        close_loops(&trajectory, &picker.into_nodes(), options)
+        close_loops(&trajectory, &picker.nodes(), options)
     }
 
     fn mean_error(poses: &[(f64, Pose2)], truth: &[Pose2]) -> Real {
@@ -602,10 +611,16 @@ mod tests {
         let (poses, report) = run(truth, front, &BackendOptions::default());
         assert_eq!(report.loops, 0);
         assert!(poses.iter().zip(front).all(|(p, f)| p.1 == *f));
-        // And switched off, nothing is searched.
+    }
+
+    #[test]
+    fn switched_off_the_loop_stays_open() {
+        let truth = truth();
+        let front = drifting(&truth, 0.0012);
         let off = BackendOptions { enabled: false, ..BackendOptions::default() };
-        let (_, report) = run(truth, front, &off);
-        assert_eq!(report.searches, 0);
+        let (poses, report) = run(&truth, &front, &off);
+        assert_eq!((report.searches, report.loops), (0, 0));
+        assert!(poses.iter().zip(&front).all(|(p, f)| p.1 == *f));
     }
 
     #[test]

@@ -20,7 +20,7 @@ pub(crate) struct Found {
     /// direction is pinned (a corridor's axis hardly at all).
     pub curvature: Mat3,
     /// A pose away from it (0.5 m or 0.1 rad) that scores within 90% of
-    /// it, if any: a ridge (a corridor's axis) or repeated structure
+    /// it, if any was looked for and found: a ridge (a corridor's axis) or repeated structure
     /// (doors, rooms alike), where the match may be the wrong copy.
     pub rival: Option<Pose2>,
 }
@@ -73,12 +73,15 @@ struct Candidate {
 }
 
 /// The best pose in `window` for `points` (robot frame) on `field`, if
-/// its score reaches `min_score`: branch and bound, then refinement.
+/// its score reaches `min_score`: branch and bound, then refinement. Its
+/// rival (see [`Found::rival`]) is looked for only if `wants_rival` says
+/// so of the match, since it takes a second descent.
 pub(crate) fn search(
     field: &Field,
     points: &[(Real, Real)],
     window: Window,
     min_score: Real,
+    wants_rival: impl FnOnce(&Found) -> bool,
 ) -> Option<Found> {
     if points.is_empty() {
         return None;
@@ -133,37 +136,37 @@ pub(crate) fn search(
         }
     }
     let threshold = (min_score * FULL * coarse_points.len() as Real).ceil() as u32;
-    let mut rivals = roots.clone();
     let mut best: Option<Candidate> = None;
     let mut best_bound = threshold.saturating_sub(1);
     descend(&mut roots, reach_cells, &bound, None, &mut best, &mut best_bound);
     let best = best?;
-    // A rival: a pose away from the best (beyond a few cells or heading
-    // steps) that scores nearly as well, as in a corridor whose doors
-    // repeat or among rooms alike.
-    let apart = Apart {
-        best,
-        cells: (UNIQUE_APART.0 / r).ceil() as i64,
-        headings: (UNIQUE_APART.1 / step).ceil() as usize,
-    };
-    let mut rival: Option<Candidate> = None;
-    let mut rival_bound = ((UNIQUE_RATIO * Real::from(best.bound)).ceil() as u32).saturating_sub(1);
-    descend(&mut rivals, reach_cells, &bound, Some(&apart), &mut rival, &mut rival_bound);
-    let (theta, _) = headings[best.heading];
-    let coarse = Pose2::new(
-        window.around.x + best.offset.0 as Real * r,
-        window.around.y + best.offset.1 as Real * r,
-        theta,
-    );
-    let rival = rival.map(|c| {
+    let pose_of = |c: &Candidate| {
         Pose2::new(
             window.around.x + c.offset.0 as Real * r,
             window.around.y + c.offset.1 as Real * r,
             headings[c.heading].0,
         )
-    });
-    let refined = Found { rival, ..refine(field, points, coarse) };
-    (refined.score >= min_score).then_some(refined)
+    };
+    let mut refined = refine(field, points, pose_of(&best));
+    if refined.score < min_score {
+        return None;
+    }
+    if wants_rival(&refined) {
+        // A rival: a pose away from the best (beyond a few cells or
+        // heading steps) that scores nearly as well, as in a corridor
+        // whose doors repeat or among rooms alike. The roots are sorted
+        // already (stably), so the second descent sees them as the first.
+        let apart = Apart {
+            best,
+            cells: (UNIQUE_APART.0 / r).ceil() as i64,
+            headings: (UNIQUE_APART.1 / step).ceil() as usize,
+        };
+        let mut rival: Option<Candidate> = None;
+        let mut rival_bound = ((UNIQUE_RATIO * Real::from(best.bound)).ceil() as u32).saturating_sub(1);
+        descend(&mut roots, reach_cells, &bound, Some(&apart), &mut rival, &mut rival_bound);
+        refined.rival = rival.as_ref().map(pose_of);
+    }
+    Some(refined)
 }
 
 /// Depth-first over `candidates`, best bound first, pruning every branch
@@ -295,15 +298,15 @@ mod tests {
             })
             .collect();
         let guess = Pose2::new(2.4, 0.6, 0.1);
-        let found =
-            search(&field, &points, Window { around: guess, reach: 1.5, turn: 0.35 }, 0.5).expect("a match");
+        let found = search(&field, &points, Window { around: guess, reach: 1.5, turn: 0.35 }, 0.5, |_| true)
+            .expect("a match");
         assert!(found.pose.distance(&truth) < 0.02, "{:?}", found.pose);
         assert!((found.pose.theta - truth.theta).abs() < 0.005, "{:?}", found.pose);
         assert!(found.score > 0.8, "{}", found.score);
         assert!(found.rival.is_none(), "the room's corner has no double: {:?}", found.rival);
         // A window that does not hold the truth finds no match that good.
         let elsewhere = Window { around: Pose2::new(-3.0, -3.0, 2.0), reach: 0.5, turn: 0.1 };
-        assert!(search(&field, &points, elsewhere, 0.5).is_none());
+        assert!(search(&field, &points, elsewhere, 0.5, |_| true).is_none());
     }
 
     #[test]
@@ -325,8 +328,8 @@ mod tests {
             .filter(|p| (p.0 - truth.x).abs() < 1.2)
             .map(|&(x, y)| (x - truth.x, y - truth.y))
             .collect();
-        let found =
-            search(&field, &points, Window { around: truth, reach: 1.5, turn: 0.1 }, 0.3).expect("a match");
+        let found = search(&field, &points, Window { around: truth, reach: 1.5, turn: 0.1 }, 0.3, |_| true)
+            .expect("a match");
         let rival = found.rival.expect("a post a metre on");
         assert!((rival.x - found.pose.x).abs() > 0.5, "{rival:?} against {:?}", found.pose);
     }
