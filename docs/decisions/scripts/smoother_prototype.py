@@ -8,10 +8,11 @@ Analysis only; squall does not run it and CI does not need it
   squall sim --world campus --seed 1 --odometry poor --out cp
   squall slam --log cp/sim.clf --seed 1 --out cp-raw \
       --set matcher.params.smoother=none --set backend.params.enabled=false
-  python3 smoother_prototype.py cp/sim.clf cp-raw/trajectory.tum out.tum [cp/ground_truth.tum]
+  python3 smoother_prototype.py [--floor] cp/sim.clf cp-raw/trajectory.tum out.tum [cp/ground_truth.tum]
   squall eval --trajectory out.tum --relations cp/sim.relations
 
-It writes up to three trajectories: OUT with the three-way smoother (robust hat),
+It writes up to three trajectories: OUT with the three-way smoother (robust hat;
+with --floor, no noise below its estimate's standard error),
 OUT.current.tum (a re-implementation of today's two-way smoother),
 and, given ground truth, OUT.true.tum (three-way, true noises) and prints
 the noises per processed step (along, across, heading).
@@ -220,7 +221,10 @@ def run3(clf, rawp, outp, mode='hat', gtp=None, rscale=1.0, maxr=None):
     Vol=rv(Eo[ok]); Vls=rv(Es[ok]); Vos=rv((Es-Eo)[ok])
     vo=np.maximum((Vol+Vos-Vls)/2,1e-8); vl=np.maximum((Vol+Vls-Vos)/2,1e-8); vs=np.maximum((Vos+Vls-Vol)/2,1e-8)
     if ROBUST_FLOOR:
-        fl=np.minimum(np.minimum(Vol,Vos),Vls)/4
+        # No noise below the estimate's own standard error (a MAD variance
+        # from n samples: about 1.65 * V * sqrt(2/n)).
+        n=ok.sum(); se=lambda V: V*math.sqrt(2/n)*1.65
+        fl=np.sqrt(se(Vol)**2+se(Vos)**2+se(Vls)**2)/2
         vo=np.maximum(vo,fl); vs=np.maximum(vs,fl); vl=np.maximum(vl,fl)
     if mode=='true':
         gt=load_tum(gtp); g=[gt[t] for t in P]; gs=[relp(g[k],g[k+1]) for k in range(len(P)-1)]
@@ -248,9 +252,10 @@ def run3(clf, rawp, outp, mode='hat', gtp=None, rscale=1.0, maxr=None):
 
 if __name__ == "__main__":
     import sys
-    ROBUST_FLOOR = False
-    clf, raw, out = sys.argv[1:4]
-    truth = sys.argv[4] if len(sys.argv) > 4 else None
+    args = [a for a in sys.argv[1:] if a != '--floor']
+    ROBUST_FLOOR = '--floor' in sys.argv
+    clf, raw, out = args[:3]
+    truth = args[3] if len(args) > 3 else None
     so, ss, sl, kept = run3(clf, raw, out, 'hat')
     print("hat: odometry", np.round(so, 4), "scan-to-scan", np.round(ss, 4), "lineage", np.round(sl, 4),
           "steps matched %.2f" % kept)
