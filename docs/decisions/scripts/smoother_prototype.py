@@ -15,7 +15,8 @@ It writes up to three trajectories: OUT with the three-way smoother (robust hat;
 with --floor, no noise below its estimate's standard error),
 OUT.current.tum (a re-implementation of today's two-way smoother),
 and, given ground truth, OUT.true.tum (three-way, true noises) and prints
-the noises per processed step (along, across, heading).
+the noises per processed step (along, across, heading); given ground
+truth, also each estimate's true error per step.
 """
 import math
 import numpy as np
@@ -41,19 +42,10 @@ def load_odo(clf):
 def rel(a,b):
     dx,dy=b[0]-a[0],b[1]-a[1]; c,s=math.cos(a[2]),math.sin(a[2])
     return np.array([c*dx+s*dy,-s*dx+c*dy,math.atan2(math.sin(b[2]-a[2]),math.cos(b[2]-a[2]))])
-import sys, math
-import numpy as np
 def wrap(a): return math.atan2(math.sin(a), math.cos(a))
 def compose(a,b):
     c,s=math.cos(a[2]),math.sin(a[2])
     return (a[0]+c*b[0]-s*b[1], a[1]+s*b[0]+c*b[1], wrap(a[2]+b[2]))
-def processed(raw, odo, ts):
-    # processed scans: where raw step differs from odometry step
-    out=[ts[0]]
-    for a,b in zip(ts, ts[1:]):
-        d=rel(raw[a],raw[b])-rel(odo[a],odo[b])
-        if abs(d[0])+abs(d[1])+abs(d[2])>1e-7: out.append(b)
-    return out
 
 def gate_stamps(odo, ts, lin=1.0, ang=0.5):
     out=[ts[0]]; L=A=0.0
@@ -96,12 +88,11 @@ def solve(lin_steps, res, Rinv, Qinv_list):
         H[j:j+3,j:j+3]+=Qi; H[i:i+3,i:i+3]+=back.T@Qi@back
         H[i:i+3,j:j+3]+=-back.T@Qi; H[j:j+3,i:i+3]+=-Qi@back
         g[j:j+3]+=Qi@e; g[i:i+3]+=-back.T@Qi@e
-    from scipy.linalg import solve_banded
     import scipy.sparse, scipy.sparse.linalg
     d=scipy.sparse.linalg.spsolve(scipy.sparse.csc_matrix(H),-g)
     return d.reshape(n,3)
 
-def run(gtp, clf, rawp, variant, outp):
+def run(clf, rawp, variant, outp):
     odo=load_odo(clf); raw=load_tum(rawp); ts=sorted(raw)
     P=gate_stamps(odo,ts)
     lin=[raw[t] for t in P]; od=[odo[t] for t in P]
@@ -158,23 +149,6 @@ def load_scans(clf, maxr=None):
     return d
 
 from scipy.spatial import cKDTree
-def icp(src, dst, guess, iters=30, reject=0.5):
-    # find T (x,y,th) with dst ≈ T*src ; point-to-point
-    x,y,th=guess; tree=cKDTree(dst)
-    for it in range(iters):
-        c,s=math.cos(th),math.sin(th)
-        p=src@np.array([[c,s],[-s,c]])+[x,y]
-        dd,ii=tree.query(p)
-        thr=max(reject*(0.5**(it//5)),0.05)
-        m=dd<thr
-        if m.sum()<10: return None
-        A=src[m]; B=dst[ii[m]]
-        ma,mb=A.mean(0),B.mean(0)
-        H=(A-ma).T@(B-mb); th=math.atan2(H[0,1]-H[1,0],H[0,0]+H[1,1])
-        c,s=math.cos(th),math.sin(th); Rm=np.array([[c,-s],[s,c]])
-        t=mb-Rm@ma; x,y=t
-    return (x,y,th)
-
 def normals(pts, tree, k=5):
     _,ii=tree.query(pts,k=k)
     N=np.zeros_like(pts); ok=np.zeros(len(pts),bool)
@@ -201,7 +175,7 @@ def icp_pl(src,dst,guess,iters=25,reject=0.5):
     return (x,y,th)
 
 ROBUST_FLOOR=False
-def run3(clf, rawp, outp, mode='hat', gtp=None, rscale=1.0, maxr=None):
+def run3(clf, rawp, outp, mode='hat', gtp=None, maxr=None):
     odo=load_odo(clf); raw=load_tum(rawp); ts=sorted(raw); sc=load_scans(clf,maxr)
     P=gate_stamps(odo,ts)
     lin=[raw[t] for t in P]; od=[odo[t] for t in P]
@@ -231,7 +205,7 @@ def run3(clf, rawp, outp, mode='hat', gtp=None, rscale=1.0, maxr=None):
         To=np.array([vec(relp(gg,u)) for gg,u in zip(gs,us)]); To=To-U@fit_systematic(U,To).T
         Ts=np.array([vec(relp(gg,s)) for gg,s,o_ in zip(gs,ss,ok) if o_ ])
         vo=To.var(0); vs=Ts.var(0); vl=np.array([vec(relp(gg,a)) for gg,a in zip(gs,ls)]).var(0)
-    R=vl*rscale
+    R=vl
     Qi=[]; res=[]
     Ioi=np.diag(1/np.maximum(vo,1e-10)); Isi=np.diag(1/np.maximum(vs,1e-10))
     for k in range(len(ls)):
@@ -259,7 +233,15 @@ if __name__ == "__main__":
     so, ss, sl, kept = run3(clf, raw, out, 'hat')
     print("hat: odometry", np.round(so, 4), "scan-to-scan", np.round(ss, 4), "lineage", np.round(sl, 4),
           "steps matched %.2f" % kept)
-    run('', clf, raw, rust_variant, out + '.current.tum')
+    fitted_r, fitted_q, _ = run(clf, raw, rust_variant, out + '.current.tum')
+    print("today's fit: lineage (R)", np.round(np.sqrt(fitted_r), 4), "odometry (Q)", np.round(np.sqrt(fitted_q), 4))
     if truth:
         so, ss, sl, _ = run3(clf, raw, out + '.true.tum', 'true', truth)
         print("true: odometry", np.round(so, 4), "scan-to-scan", np.round(ss, 4), "lineage", np.round(sl, 4))
+        # The unsmoothed lineage's and the calibrated odometry's error per
+        # processed step, and the lineage's lag-1 correlation (white pose
+        # noise: -0.5; a random walk: 0).
+        _, odometry, lineage, _ = oracle(truth, clf, raw)
+        lag1 = [np.corrcoef(lineage[1:, c], lineage[:-1, c])[0, 1] for c in range(3)]
+        print("per step, all steps: lineage", np.round(lineage.std(0), 4), "odometry", np.round(odometry.std(0), 4),
+              "lineage lag-1", np.round(lag1, 2))
