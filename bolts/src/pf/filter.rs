@@ -7,6 +7,7 @@ use crate::pf::assign::{Moved, Placement, assign, loads, moved};
 use crate::pf::model::ParticleModel;
 use crate::pf::population::Population;
 use crate::pf::shard::Shard;
+use crate::pf::trajectory::MeasuredStep;
 use squall_core::geometry::{Pose2, Real};
 
 /// What one correcting reading did.
@@ -36,6 +37,10 @@ pub struct Filter<M: ParticleModel> {
     task_of: Vec<usize>,
     population: Option<Population>,
     last: Option<M::Input>,
+    /// The last correcting reading, and each correcting reading's stamp
+    /// with the model's measurement of the step that reached it.
+    last_corrected: Option<M::Input>,
+    measured: Vec<(f64, Option<MeasuredStep>)>,
     gate: M::Gate,
     step: u64,
 }
@@ -63,6 +68,8 @@ where
             task_of: Vec::new(),
             population: None,
             last: None,
+            last_corrected: None,
+            measured: Vec::new(),
             gate: M::Gate::default(),
             step: 0,
         })
@@ -107,10 +114,14 @@ where
         let poses: Vec<Pose2> = poses.into_iter().map(|p| p.1).collect();
         self.population = Some(Population::start(&poses, self.seed, stamp, odometry));
         self.last = Some(first.clone());
+        self.last_corrected = Some(first.clone());
         StepReport { neff: n as Real, ..StepReport::default() }
     }
 
     fn correct(&mut self, input: &M::Input) -> StepReport {
+        let measured =
+            self.last_corrected.replace(input.clone()).and_then(|from| self.model.measure_step(&from, input));
+        self.measured.push((self.model.mark(input).0, measured));
         let model = &self.model;
         let step = self.step;
         let mut reports: Vec<_> =
@@ -169,6 +180,13 @@ where
             moved: moved_now,
             injected: decision.fresh.len(),
         }
+    }
+
+    /// The model's measurement of each step of the best lineage (see
+    /// [`crate::pf::ParticleModel::measure_step`]).
+    pub fn measured_steps(&self) -> Vec<Option<MeasuredStep>> {
+        let Some(population) = &self.population else { return Vec::new() };
+        crate::pf::trajectory::measured_steps(&population.best_trajectory(), &self.measured)
     }
 
     /// The population (weights and lineage), once started.

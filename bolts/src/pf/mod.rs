@@ -19,4 +19,5 @@ pub(crate) mod trajectory;
 
 pub use filter::{Filter, StepReport};
 pub use model::{Correction, ParticleModel};
+pub use smoother::{MeasuredStep, Smoother};
 pub use trajectory::{BetweenScans, NoiseWeights, TrajectoryOutput};

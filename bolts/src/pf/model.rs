@@ -5,7 +5,7 @@
 use rand_chacha::ChaCha8Rng;
 
 use crate::pf::resample::Scheme;
-use crate::pf::trajectory::{BetweenScans, NoiseWeights, Smoother, TrajectoryOutput};
+use crate::pf::trajectory::{BetweenScans, MeasuredStep, NoiseWeights, Smoother, TrajectoryOutput};
 use squall_core::geometry::{Pose2, Real};
 
 /// The model-specific parts of a particle filter.
@@ -78,6 +78,15 @@ pub trait ParticleModel: Send + Sync + 'static {
     fn update(&self, state: &mut Self::State, input: &Self::Input) -> u64 {
         let _ = (state, input);
         0
+    }
+
+    /// The model's own measurement of the motion between two correcting
+    /// readings, apart from the particles (for SLAM: the later scan
+    /// matched against the earlier one), for the output smoother. The
+    /// default measures nothing.
+    fn measure_step(&self, from: &Self::Input, to: &Self::Input) -> Option<MeasuredStep> {
+        let _ = (from, to);
+        None
     }
 
     /// The particle's pose, for outputs and the lineage.

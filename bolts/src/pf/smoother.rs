@@ -33,7 +33,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use squall_core::covariance::{IDENTITY, Mat3, ZERO, add, apply, diagonal, inverse, mul, scale, transpose};
+use squall_core::covariance::{
+    IDENTITY, Mat3, ZERO, add, apply, diagonal, inverse, mul, quadratic, scale, transpose,
+};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 
 use super::trajectory::Corrected;
@@ -42,9 +44,14 @@ use super::trajectory::Corrected;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Smoother {
+    /// Fused with the calibrated odometry and the model's own measurement
+    /// of each step (for SLAM, scan-to-scan matching), the three noises
+    /// told apart by the three-cornered hat (see [`smooth`]); as
+    /// `Odometry` where the model measures too few steps.
+    #[default]
+    Scans,
     /// Fused with the calibrated odometry, noise estimated from the run
     /// (see the module docs).
-    #[default]
     Odometry,
     /// Written as the filter corrected them.
     None,
@@ -65,9 +72,35 @@ const MIN_STEPS: usize = 4 * MAX_SPAN;
 /// millimetre, so that the system stays well conditioned.
 const FLOOR: Real = 1e-10;
 
+/// A measurement of the motion between two consecutive processed
+/// readings made apart from the filter (for SLAM, the later scan matched
+/// against the earlier one), with its covariance, whose scale the
+/// smoother does not trust and fits.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MeasuredStep {
+    /// The motion, in the earlier reading's frame.
+    pub motion: Pose2,
+    /// Its covariance in (x, y, θ), up to scale.
+    pub covariance: Mat3,
+}
+
+/// χ² with three degrees of freedom at 0.999: a step whose measurement and
+/// odometry differ by more, given both their noises, has one of them
+/// wrong (a failed match, a wheel slip) and is fused without the match.
+const AGREEMENT: Real = 16.27;
+
+/// Outliers, for the noises' estimate: a difference more than this many
+/// robust standard deviations from the median.
+const OUTLIER: Real = 6.0;
+
 /// The poses of `corrected` as `smoother` says, each with its stamp and
-/// odometry.
-pub(crate) fn smooth(corrected: &[Corrected], smoother: Smoother) -> Vec<Corrected> {
+/// odometry; `measured[k]` is the model's measurement of the step from
+/// processed reading k to k + 1, where it made one.
+pub(crate) fn smooth(
+    corrected: &[Corrected],
+    smoother: Smoother,
+    measured: &[Option<MeasuredStep>],
+) -> Vec<Corrected> {
     let steps = corrected.len().saturating_sub(1);
     if smoother == Smoother::None || steps < MIN_STEPS {
         return corrected.to_vec();
@@ -80,8 +113,13 @@ pub(crate) fn smooth(corrected: &[Corrected], smoother: Smoother) -> Vec<Correct
     let systematic = fit_systematic(&odometry, &raw);
     let residual: Vec<[Real; 3]> =
         raw.iter().zip(&odometry).map(|(e, u)| sub(*e, apply(&systematic, vector(u)))).collect();
-    let (matcher, step) = noise(&residual);
-    let deltas = solve(&lineage, &residual, matcher, step);
+    let three_way = if smoother == Smoother::Scans { three_way(&lineage, &residual, measured) } else { None };
+    let (prior, fused) = three_way.unwrap_or_else(|| {
+        let (matcher, step) = noise(&residual);
+        let information = diagonal(step.map(|v| 1.0 / v));
+        (matcher, residual.iter().map(|&e| (information, e)).collect())
+    });
+    let deltas = solve(&lineage, &fused, prior);
     corrected
         .iter()
         .zip(deltas)
@@ -147,6 +185,126 @@ fn noise(residual: &[[Real; 3]]) -> ([Real; 3], [Real; 3]) {
     (matcher, step)
 }
 
+/// Per step, the information of its residual and the residual (Qₖ⁻¹, eₖ).
+type Steps = Vec<(Mat3, [Real; 3])>;
+
+/// Each step's odometry fused with the model's measurement of it, and
+/// the lineage's variance per processed reading; `None` if too few steps
+/// were measured to tell the noises apart.
+///
+/// Three estimates of the same motions with independent errors (the
+/// lineage's, the calibrated odometry's, the measurement's) give their
+/// three variances from the variances of their pairwise differences
+/// alone: σ²ₒ = (V(o−l) + V(o−s) − V(l−s)) / 2 and likewise (the
+/// three-cornered hat of clock comparisons). This replaces the two-way
+/// fit's growth model, which cannot tell a lineage that wanders slowly
+/// against its map from odometry that drifts (decision 0014). Per
+/// component, the hat is taken over the steps whose measurement is
+/// well constrained in that component (predicted variance at most the
+/// median), where the measurement's error is least tied to the scene the
+/// lineage also sees; the variances are robust (median absolute
+/// deviation) and none is set below the standard error of its own
+/// estimate. The hat's measurement variance over those steps gives the
+/// scale of the measurement's covariance, which then weighs every
+/// step, with its degenerate directions (a corridor) left to the
+/// odometry.
+fn three_way(
+    lineage: &[Pose2],
+    odometry: &[[Real; 3]],
+    measured: &[Option<MeasuredStep>],
+) -> Option<([Real; 3], Steps)> {
+    if measured.len() != lineage.len() || measured.iter().flatten().count() < MIN_STEPS {
+        return None;
+    }
+    // The lineage's step against the measured one, as (x, y, θ).
+    let against: Vec<Option<([Real; 3], [Real; 3])>> = lineage
+        .iter()
+        .zip(measured)
+        .map(|(a, m)| m.map(|m| (vector(&a.relative_to(&m.motion)), diagonal_of(&m.covariance))))
+        .collect();
+    let (mut odometry_var, mut lineage_var, mut scale) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+    for c in 0..3 {
+        let predicted: Vec<Real> = against.iter().flatten().map(|m| m.1[c]).collect();
+        let limit = median(predicted);
+        let mut pairs: Vec<(Real, Real, Real)> = Vec::new();
+        for (o, m) in odometry.iter().zip(&against) {
+            if let Some((s, var)) = m
+                && var[c] <= limit
+            {
+                pairs.push((o[c], s[c], var[c]));
+            }
+        }
+        let differences: Vec<Real> = pairs.iter().map(|p| p.1 - p.0).collect();
+        let (centre, spread) = (median(differences.clone()), robust_sd(&differences));
+        pairs.retain(|p| (p.1 - p.0 - centre).abs() < OUTLIER * spread + 1e-12);
+        if pairs.len() < MIN_STEPS / 2 {
+            return None;
+        }
+        let variance = |f: &dyn Fn(&(Real, Real, Real)) -> Real| {
+            robust_sd(&pairs.iter().map(f).collect::<Vec<_>>()).powi(2)
+        };
+        let v_ol = variance(&|p| p.0);
+        let v_ls = variance(&|p| p.1);
+        let v_os = variance(&|p| p.1 - p.0);
+        // A median-absolute-deviation variance from n samples has a
+        // standard error of about 1.65 · V · √(2/n).
+        let n = pairs.len() as Real;
+        let error = |v: Real| 1.65 * v * (2.0 / n).sqrt();
+        let floor = (error(v_ol).powi(2) + error(v_os).powi(2) + error(v_ls).powi(2)).sqrt() / 2.0;
+        odometry_var[c] = ((v_ol + v_os - v_ls) / 2.0).max(floor).max(FLOOR);
+        lineage_var[c] = ((v_ol + v_ls - v_os) / 2.0).max(floor).max(FLOOR);
+        let measured_var = ((v_os + v_ls - v_ol) / 2.0).max(floor).max(FLOOR);
+        scale[c] = measured_var / median(pairs.iter().map(|p| p.2).collect()).max(FLOOR);
+    }
+    let root = scale.map(Real::sqrt);
+    let odometry_information = diagonal(odometry_var.map(|v| 1.0 / v));
+    let fused = odometry
+        .iter()
+        .zip(measured)
+        .zip(&against)
+        .map(|((&o, m), a)| {
+            let (Some(m), Some((s, _))) = (m, a) else { return (odometry_information, o) };
+            let covariance: Mat3 =
+                std::array::from_fn(|i| std::array::from_fn(|j| root[i] * m.covariance[i][j] * root[j]));
+            let difference = sub(*s, o);
+            let both = add(&covariance, &diagonal(odometry_var));
+            let agrees = inverse(&both).is_some_and(|inv| quadratic(&inv, difference) < AGREEMENT);
+            match inverse(&covariance) {
+                Some(measurement_information) if agrees => {
+                    let information = add(&odometry_information, &measurement_information);
+                    let pull = add3(apply(&odometry_information, o), apply(&measurement_information, *s));
+                    inverse(&information)
+                        .map_or((odometry_information, o), |c| (information, apply(&c, pull)))
+                }
+                _ => (odometry_information, o),
+            }
+        })
+        .collect();
+    Some((lineage_var, fused))
+}
+
+fn diagonal_of(a: &Mat3) -> [Real; 3] {
+    [a[0][0], a[1][1], a[2][2]]
+}
+
+/// The median of `values` (the mean of the middle two for an even count;
+/// 0 for none).
+fn median(mut values: Vec<Real>) -> Real {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_unstable_by(Real::total_cmp);
+    let n = values.len();
+    if n % 2 == 1 { values[n / 2] } else { 0.5 * (values[n / 2 - 1] + values[n / 2]) }
+}
+
+/// A robust standard deviation: 1.4826 times the median absolute
+/// deviation from the median.
+fn robust_sd(values: &[Real]) -> Real {
+    let centre = median(values.to_vec());
+    1.4826 * median(values.iter().map(|v| (v - centre).abs()).collect())
+}
+
 /// The SE(2) adjoint of `p`: how a small motion in the frame after `p`
 /// reads in the frame before it.
 fn adjoint(p: &Pose2) -> Mat3 {
@@ -155,26 +313,26 @@ fn adjoint(p: &Pose2) -> Mat3 {
 }
 
 /// The corrections δₖ (each applied on the right of pose k) minimising
-/// Σ δₖᵀR⁻¹δₖ + Σ rₖᵀQ⁻¹rₖ, where rₖ = eₖ + δₖ − Adj(aₖ)⁻¹δₖ₋₁ is the
-/// step's odometry residual linearised at the lineage. The system is block
-/// tridiagonal: one forward elimination and one back substitution.
-fn solve(lineage: &[Pose2], residual: &[[Real; 3]], matcher: [Real; 3], step: [Real; 3]) -> Vec<[Real; 3]> {
+/// Σ δₖᵀR⁻¹δₖ + Σ rₖᵀQₖ⁻¹rₖ, where rₖ = eₖ + δₖ − Adj(aₖ)⁻¹δₖ₋₁ is the
+/// step's residual linearised at the lineage, `steps[k]` = (Qₖ⁻¹, eₖ) and
+/// R is diagonal, `matcher`. The system is block tridiagonal: one forward
+/// elimination and one back substitution.
+fn solve(lineage: &[Pose2], steps: &[(Mat3, [Real; 3])], matcher: [Real; 3]) -> Vec<[Real; 3]> {
     let nodes = lineage.len() + 1;
     let prior = diagonal(matcher.map(|v| 1.0 / v));
-    let odometry = diagonal(step.map(|v| 1.0 / v));
     // Diagonal blocks, blocks above the diagonal (node k with k + 1), and
     // the gradient.
     let mut diag = vec![prior; nodes];
     let mut upper = vec![ZERO; nodes - 1];
     let mut gradient = vec![[0.0; 3]; nodes];
-    for (k, (a, e)) in lineage.iter().zip(residual).enumerate() {
+    for (k, (a, (odometry, e))) in lineage.iter().zip(steps).enumerate() {
         let back = inverse(&adjoint(a)).unwrap_or(IDENTITY);
         let back_t = transpose(&back);
         // rₖ₊₁ = e + δₖ₊₁ − back·δₖ.
-        diag[k + 1] = add(&diag[k + 1], &odometry);
-        diag[k] = add(&diag[k], &mul(&back_t, &mul(&odometry, &back)));
-        upper[k] = scale(&mul(&back_t, &odometry), -1.0);
-        let pull = apply(&odometry, *e);
+        diag[k + 1] = add(&diag[k + 1], odometry);
+        diag[k] = add(&diag[k], &mul(&back_t, &mul(odometry, &back)));
+        upper[k] = scale(&mul(&back_t, odometry), -1.0);
+        let pull = apply(odometry, *e);
         gradient[k + 1] = add3(gradient[k + 1], pull);
         gradient[k] = sub(gradient[k], apply(&back_t, pull));
     }
@@ -258,7 +416,7 @@ mod tests {
     #[test]
     fn a_jittery_lineage_follows_the_odometry_locally_and_the_lineage_far() {
         let (truth, corrected) = run(400, 0.02);
-        let smoothed = smooth(&corrected, Smoother::Odometry);
+        let smoothed = smooth(&corrected, Smoother::Odometry, &[]);
         assert_eq!(smoothed.len(), corrected.len());
         let (before, after) = (relation_error(&truth, &corrected, 1), relation_error(&truth, &smoothed, 1));
         assert!(after < 0.5 * before, "one step: {after} against {before}");
@@ -269,6 +427,100 @@ mod tests {
         for (s, c) in smoothed.iter().zip(&corrected) {
             assert_eq!((s.0, s.2), (c.0, c.2), "stamps and odometry stay");
         }
+    }
+
+    /// The run of [`run`], but the lineage wanders: its error is a slow
+    /// process (each step keeps 95% of it and adds `walk` metres, as a
+    /// particle's map drifts under it and back), which the growth model
+    /// takes for odometry noise; and each step is also measured, with
+    /// `measurement` metres of error along x and y and a tenth of it in
+    /// θ, except along x in every third step, where the measurement is
+    /// blind (a corridor): its error there is 1 m and its covariance says
+    /// so.
+    #[allow(clippy::type_complexity)]
+    fn measured_run(
+        steps: usize,
+        walk: Real,
+        measurement: Real,
+    ) -> (Vec<Pose2>, Vec<Corrected>, Vec<Option<MeasuredStep>>) {
+        let (truth, mut corrected) = run(steps, 0.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(29);
+        let mut offset = [0.0; 3];
+        for c in corrected.iter_mut().skip(1) {
+            offset = [
+                0.95 * offset[0] + walk * standard_normal(&mut rng),
+                0.95 * offset[1] + walk * standard_normal(&mut rng),
+                0.95 * offset[2] + 0.1 * walk * standard_normal(&mut rng),
+            ];
+            c.1 = c.1.compose(&Pose2::new(offset[0], offset[1], offset[2]));
+        }
+        let measured = truth
+            .windows(2)
+            .enumerate()
+            .map(|(k, w)| {
+                let blind = k % 3 == 1;
+                let along = if blind { 1.0 } else { measurement };
+                let error = Pose2::new(
+                    along * standard_normal(&mut rng),
+                    measurement * standard_normal(&mut rng),
+                    0.1 * measurement * standard_normal(&mut rng),
+                );
+                let covariance = diagonal([along.powi(2), measurement.powi(2), (0.1 * measurement).powi(2)]);
+                // The covariance's scale is not trusted: give it wrong by 3.
+                Some(MeasuredStep {
+                    motion: w[1].relative_to(&w[0]).compose(&error),
+                    covariance: scale(&covariance, 9.0),
+                })
+            })
+            .collect();
+        (truth, corrected, measured)
+    }
+
+    #[test]
+    fn a_third_measurement_tells_a_wandering_lineage_from_the_odometry() {
+        // A lineage that walks 3 cm per step, odometry with 1 cm of noise
+        // per step (and 2% scale), a measurement of 5 mm: the growth model
+        // cannot tell which of lineage and odometry walks, the hat can.
+        let (truth, corrected, measured) = measured_run(600, 0.03, 0.005);
+        let two_way = smooth(&corrected, Smoother::Odometry, &measured);
+        let three_way = smooth(&corrected, Smoother::Scans, &measured);
+        for span in [1, 10] {
+            let (two, three) =
+                (relation_error(&truth, &two_way, span), relation_error(&truth, &three_way, span));
+            assert!(three < 0.6 * two, "{span} steps: three-way {three} against two-way {two}");
+        }
+        // Without measurements, or too few, it is the two-way smoother.
+        assert_eq!(smooth(&corrected, Smoother::Scans, &[]), two_way);
+        let sparse: Vec<Option<MeasuredStep>> =
+            measured.iter().enumerate().map(|(k, m)| if k < MIN_STEPS - 1 { *m } else { None }).collect();
+        assert_eq!(smooth(&corrected, Smoother::Scans, &sparse), two_way);
+    }
+
+    #[test]
+    fn a_blind_or_failed_measurement_does_not_pull_the_poses() {
+        let (truth, corrected, measured) = measured_run(600, 0.03, 0.005);
+        let clean = smooth(&corrected, Smoother::Scans, &measured);
+        // Every tenth measurement fails: 5 m and 1 rad off, with the
+        // covariance of a good match.
+        let failed: Vec<Option<MeasuredStep>> = measured
+            .iter()
+            .enumerate()
+            .map(|(k, m)| {
+                m.map(|m| {
+                    if k % 10 == 0 {
+                        MeasuredStep { motion: m.motion.compose(&Pose2::new(5.0, -5.0, 1.0)), ..m }
+                    } else {
+                        m
+                    }
+                })
+            })
+            .collect();
+        let smoothed = smooth(&corrected, Smoother::Scans, &failed);
+        let (before, after) = (relation_error(&truth, &clean, 1), relation_error(&truth, &smoothed, 1));
+        assert!(after < before + 0.003, "one step: {after} with failed matches, {before} without");
+        // The blind steps (1 m of error along x) left x to the odometry:
+        // the one-step error stays far below the blind measurement's.
+        assert!(before < 0.02, "{before}");
     }
 
     #[test]
@@ -294,7 +546,7 @@ mod tests {
     #[test]
     fn an_odometry_glitch_moves_poses_by_centimetres() {
         let (truth, corrected) = run(400, 0.02);
-        let clean = smooth(&corrected, Smoother::Odometry);
+        let clean = smooth(&corrected, Smoother::Odometry, &[]);
         for size in [0.5, 2.0, 20.0] {
             // The odometry jumps sideways at step 200, and stays jumped.
             let jump = Pose2::new(0.0, size, 0.3 * size);
@@ -303,7 +555,7 @@ mod tests {
                 .enumerate()
                 .map(|(k, &(t, p, o))| (t, p, if k >= 200 { jump.compose(&o) } else { o }))
                 .collect();
-            let smoothed = smooth(&glitched, Smoother::Odometry);
+            let smoothed = smooth(&glitched, Smoother::Odometry, &[]);
             let moved = smoothed.iter().zip(&clean).map(|(s, c)| s.1.distance(&c.1)).fold(0.0, Real::max);
             // The glitch's step inflates the odometry's noise a little and
             // bends the systematic fit a little: poses move by a
@@ -319,7 +571,7 @@ mod tests {
     #[test]
     fn an_exact_lineage_barely_moves_and_short_ones_stay_as_they_are() {
         let (truth, corrected) = run(400, 0.0);
-        let smoothed = smooth(&corrected, Smoother::Odometry);
+        let smoothed = smooth(&corrected, Smoother::Odometry, &[]);
         // Over 400 steps the noise estimate is itself uncertain and finds
         // a few millimetres of error in the lineage: the poses move by
         // that much, a fifth of a map cell at most.
@@ -328,8 +580,8 @@ mod tests {
         let most = moved.iter().copied().fold(0.0, Real::max);
         assert!(mean < 0.003 && most < 0.01, "moved {mean} on average, {most} at most");
         let (_, short) = run(MIN_STEPS - 1, 0.02);
-        assert_eq!(smooth(&short, Smoother::Odometry), short);
+        assert_eq!(smooth(&short, Smoother::Odometry, &[]), short);
         let (_, long) = run(400, 0.02);
-        assert_eq!(smooth(&long, Smoother::None), long);
+        assert_eq!(smooth(&long, Smoother::None, &[]), long);
     }
 }

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 
-pub use super::smoother::Smoother;
 use super::smoother::smooth;
+pub(crate) use super::smoother::{MeasuredStep, Smoother};
 
 /// How poses between processed scans are filled in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -55,15 +55,18 @@ pub struct NoiseWeights {
 
 /// A pose for each of `scans` (stamp, odometry), in order, from the
 /// processed scans `corrected` (oldest first, stamps among the scans'),
-/// smoothed and filled in as `output` says.
+/// smoothed and filled in as `output` says, with the model's measurements
+/// of the steps between processed scans (`measured[k]`: from
+/// `corrected[k]` to `corrected[k + 1]`; empty where it made none).
 /// Scans before the first processed scan get no pose (the filter had
 /// none), so the output may be shorter than the input.
 pub(crate) fn fill(
     corrected: &[Corrected],
     scans: &[(f64, Pose2)],
     output: TrajectoryOutput,
+    measured: &[Option<MeasuredStep>],
 ) -> Vec<(f64, Pose2)> {
-    let corrected = &smooth(corrected, output.smoother)[..];
+    let corrected = &smooth(corrected, output.smoother, measured)[..];
     let TrajectoryOutput { between: mode, noise, .. } = output;
     let along = expected_noise_along(scans, noise);
     let mut out = Vec::with_capacity(scans.len());
@@ -97,6 +100,18 @@ pub(crate) fn fill(
         out.push((stamp, blend(&forward, &backward, f)));
     }
     out
+}
+
+/// The model's measurement of each step of `lineage` (from its reading k
+/// to k + 1), found by the later reading's stamp; `None` where none was
+/// made.
+pub(crate) fn measured_steps(
+    lineage: &[Corrected],
+    measured: &[(f64, Option<MeasuredStep>)],
+) -> Vec<Option<MeasuredStep>> {
+    let by_stamp: std::collections::HashMap<u64, MeasuredStep> =
+        measured.iter().filter_map(|&(stamp, m)| Some((stamp.to_bits(), m?))).collect();
+    lineage.iter().skip(1).map(|node| by_stamp.get(&node.0.to_bits()).copied()).collect()
 }
 
 /// Cumulative expected odometry noise at each scan.
@@ -146,7 +161,7 @@ mod tests {
     #[test]
     fn interpolation_spreads_the_correction_over_the_scans_before_it() {
         let (corrected, scans) = drifting();
-        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate));
+        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate), &[]);
         assert_eq!(poses.len(), scans.len());
         for (i, (stamp, p)) in poses.iter().enumerate().take(11) {
             assert_eq!(*stamp, i as f64);
@@ -159,7 +174,7 @@ mod tests {
     #[test]
     fn odometry_mode_jumps_at_the_processed_scan() {
         let (corrected, scans) = drifting();
-        let poses = fill(&corrected, &scans, output(BetweenScans::Odometry));
+        let poses = fill(&corrected, &scans, output(BetweenScans::Odometry), &[]);
         assert!((poses[9].1.x - 0.9).abs() < 1e-12);
         assert!((poses[10].1.x - 1.1).abs() < 1e-12);
     }
@@ -175,7 +190,7 @@ mod tests {
         ];
         let end = Pose2::new(scans[2].1.x, scans[2].1.y + 0.2, 1.0);
         let corrected = vec![(0.0, Pose2::IDENTITY, scans[0].1), (2.0, end, scans[2].1)];
-        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate));
+        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate), &[]);
         let backward = end.compose(&scans[1].1.relative_to(&scans[2].1));
         let expected = blend(&scans[1].1, &backward, 0.5);
         assert!((poses[1].1.y - expected.y).abs() < 1e-12 && (poses[1].1.y - 0.1).abs() < 1e-12);
@@ -185,8 +200,8 @@ mod tests {
     fn scans_before_the_first_processed_one_get_no_pose() {
         let (mut corrected, scans) = drifting();
         corrected.remove(0);
-        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate));
+        let poses = fill(&corrected, &scans, output(BetweenScans::Interpolate), &[]);
         assert_eq!(poses.first().map(|p| p.0), Some(10.0));
-        assert!(fill(&[], &scans, output(BetweenScans::Interpolate)).is_empty());
+        assert!(fill(&[], &scans, output(BetweenScans::Interpolate), &[]).is_empty());
     }
 }

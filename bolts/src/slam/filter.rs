@@ -73,7 +73,13 @@ impl Rbpf {
     pub fn lineage_poses(&self, scans: impl IntoIterator<Item = (f64, Pose2)>) -> Vec<(f64, Pose2)> {
         let Some(population) = self.filter.population() else { return Vec::new() };
         let scans: Vec<(f64, Pose2)> = scans.into_iter().collect();
-        trajectory::fill(&population.best_trajectory(), &scans, self.filter.model().trajectory_output())
+        let measured = self.filter.measured_steps();
+        trajectory::fill(
+            &population.best_trajectory(),
+            &scans,
+            self.filter.model().trajectory_output(),
+            &measured,
+        )
     }
 }
 

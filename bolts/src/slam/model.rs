@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::pf::model::{Correction, ParticleModel};
 use crate::pf::resample::Scheme;
-use crate::pf::trajectory::{NoiseWeights, TrajectoryOutput};
+use crate::pf::trajectory::{MeasuredStep, NoiseWeights, Smoother, TrajectoryOutput};
 use crate::slam::grid::TiledGrid;
 use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
@@ -228,6 +228,13 @@ impl ParticleModel for SlamModel {
 
     fn resampling(&self) -> Scheme {
         self.options.resampling
+    }
+
+    fn measure_step(&self, from: &LaserReading, to: &LaserReading) -> Option<MeasuredStep> {
+        if self.options.smoother != Smoother::Scans {
+            return None;
+        }
+        crate::slam::scan_to_scan::match_scans(from, to)
     }
 
     fn trajectory_output(&self) -> TrajectoryOutput {

@@ -5,7 +5,8 @@ use crate::error::{Error, Result, non_negative, positive};
 use serde::{Deserialize, Serialize};
 
 pub use crate::pf::resample::Scheme;
-pub use crate::pf::trajectory::{BetweenScans, Smoother};
+pub use crate::pf::smoother::Smoother;
+pub use crate::pf::trajectory::BetweenScans;
 use squall_core::geometry::Real;
 use squall_core::motion::MotionNoise;
 
@@ -161,11 +162,12 @@ pub struct SlamOptions {
     /// GMapping reports). The default is `"interpolate"`.
     pub between_scans: BetweenScans,
     /// What is done to the best lineage's poses before they are written:
-    /// `"odometry"` fuses them with the odometry between them, weighing
-    /// each by noise estimated from the run (see [`crate::pf::smoother`]);
-    /// `"none"` writes them as the filter corrected them. Only the
-    /// trajectory changes: the particles and maps do not. The default is
-    /// `"odometry"`.
+    /// `"scans"` fuses them with the odometry and with each processed
+    /// scan matched against the one before (the default); `"odometry"`
+    /// with the odometry alone, weighing each by noise estimated from
+    /// the run (see [`crate::pf::smoother`]); `"none"` writes them as the
+    /// filter corrected them. Only the trajectory changes: the particles
+    /// and maps do not.
     pub smoother: Smoother,
     /// How the new set is drawn: `"low_variance"` (GMapping's, the
     /// default), `"ring"` (the thesis's sparse graph) or `"aggregation"`.
@@ -207,7 +209,7 @@ impl Default for SlamOptions {
             old_map_reach: 0.6,
             old_map_turn: 0.1,
             between_scans: BetweenScans::Interpolate,
-            smoother: Smoother::Odometry,
+            smoother: Smoother::Scans,
             resampling: Scheme::LowVariance,
             proposal: Proposal::Gaussian,
         }

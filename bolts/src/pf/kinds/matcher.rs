@@ -76,6 +76,9 @@ pub struct Matcher<M: HostedModel> {
     shard: Option<Shard<M>>,
     gate: M::Gate,
     previous: Option<Arc<Reading<M::Input>>>,
+    /// The last correcting reading (task 0, for the model's measurement
+    /// of each step between correcting readings).
+    previous_corrected: Option<Arc<Reading<M::Input>>>,
     /// Readings that arrived while a correction was in progress.
     queued: VecDeque<Arc<Reading<M::Input>>>,
     pending: Option<Pending<M::Input>>,
@@ -124,6 +127,7 @@ impl<M: HostedModel> Matcher<M> {
             shard: None,
             gate: M::Gate::default(),
             previous: None,
+            previous_corrected: None,
             queued: VecDeque::new(),
             pending: None,
             received: Vec::new(),
@@ -241,6 +245,7 @@ impl<M: HostedModel> Matcher<M> {
             self.best = n - 1;
             let slots = first..first + load[self.task];
             let shard = Shard::start(&self.model, self.task, self.seed, slots, &state, &reading.input);
+            self.previous_corrected = Some(reading.clone());
             let poses = shard.poses(&self.model).into_iter().map(|(slot, p)| (slot as u32, p)).collect();
             self.shard = Some(shard);
             let (particles, settings) = (n as u32, self.settings());
@@ -264,7 +269,15 @@ impl<M: HostedModel> Matcher<M> {
         for s in &slots {
             out.record("evaluations_per_particle", u64::from(s.evaluations));
         }
-        out.emit("report", Report::Corrected { step, task, tasks, mark, slots, busy_us }).await?;
+        // One task measures the step, so that the resampler hears it once
+        // whatever the number of tasks.
+        let measured = if task == 0 {
+            let since = self.previous_corrected.replace(reading.clone());
+            since.and_then(|from| self.model.measure_step(&from.input, &reading.input))
+        } else {
+            None
+        };
+        out.emit("report", Report::Corrected { step, task, tasks, mark, slots, busy_us, measured }).await?;
         self.pending = Some(Pending { reading, plan: None });
         Ok(())
     }

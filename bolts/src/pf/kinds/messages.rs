@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::pf::shard::SlotReport;
-use crate::pf::trajectory::TrajectoryOutput;
+use crate::pf::trajectory::{MeasuredStep, TrajectoryOutput};
 use squall_core::geometry::{Pose2, Real};
 
 /// Dispatcher → every matcher task: a reading and its number in the run
@@ -89,6 +89,10 @@ pub enum Report {
         slots: Vec<SlotReport>,
         /// Microseconds the task spent correcting.
         busy_us: u64,
+        /// The model's measurement of the step since the previous
+        /// correcting reading (task 0 only; see
+        /// [`crate::pf::ParticleModel::measure_step`]).
+        measured: Option<MeasuredStep>,
     },
     /// This task replaces one whose particles were lost with its process
     /// (cluster mode): it holds nothing until a decision has it join.

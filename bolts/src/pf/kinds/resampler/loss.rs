@@ -154,6 +154,7 @@ mod tests {
             settings: None,
             task_of: Vec::new(),
             marks: Vec::new(),
+            measured: Vec::new(),
             gathered: Gathered::default(),
             modes: ModeSettings { keep: 3, radius: 0.5, turn: 0.5 },
             task_states: vec![TaskState::default(); tasks],

@@ -36,7 +36,7 @@ use crate::pf::kinds::messages::{Decision, Ready, Report, Settings};
 use crate::pf::modes::{Hypotheses, modes};
 use crate::pf::population::Population;
 use crate::pf::shard::SlotReport;
-use crate::pf::trajectory;
+use crate::pf::trajectory::{self, MeasuredStep};
 use squall_core::geometry::{Pose2, Real};
 use squall_core::sensor::PoseStamped;
 use tasks::{Gathered, Holding, TaskState};
@@ -102,6 +102,9 @@ pub struct Resampler {
     task_of: Vec<usize>,
     /// Every reading's stamp and odometry, for the trajectory.
     marks: Vec<(f64, Pose2)>,
+    /// Each correcting reading's stamp and the model's measurement of the
+    /// step that reached it, for the trajectory's smoother.
+    measured: Vec<(f64, Option<MeasuredStep>)>,
     gathered: Gathered,
     /// How modes are reported on `hypotheses`.
     modes: ModeSettings,
@@ -133,6 +136,7 @@ impl Resampler {
             settings: None,
             task_of: Vec::new(),
             marks: Vec::new(),
+            measured: Vec::new(),
             gathered: Gathered::default(),
             modes: ModeSettings {
                 keep: params.hypotheses,
@@ -237,6 +241,7 @@ impl Resampler {
         };
         out.record("injected", d.fresh.len() as u64);
         self.marks.push(mark);
+        self.measured.push((mark.0, g.measured));
         out.emit("decision", decision).await?;
         let ModeSettings { keep, radius, turn } = self.modes;
         if keep > 0 {
@@ -340,9 +345,10 @@ impl Bolt for Resampler {
                     self.complete(out).await?;
                 }
             }
-            Report::Corrected { step, task, tasks, mark, slots, busy_us } => {
+            Report::Corrected { step, task, tasks, mark, slots, busy_us, measured } => {
                 let all = self.heard(*step, *task, *tasks)?;
                 let g = &mut self.gathered;
+                g.measured = g.measured.or(*measured);
                 g.slots.extend_from_slice(slots);
                 g.busy_us.push(*busy_us);
                 g.mark = Some(*mark);
@@ -368,7 +374,10 @@ impl Bolt for Resampler {
             return Ok(());
         };
         out.count("processed_scans", population.best_trajectory().len() as u64);
-        let poses = trajectory::fill(&population.best_trajectory(), &self.marks, settings.trajectory);
+        let lineage = population.best_trajectory();
+        let measured = trajectory::measured_steps(&lineage, &self.measured);
+        out.count("measured_steps", measured.iter().flatten().count() as u64);
+        let poses = trajectory::fill(&lineage, &self.marks, settings.trajectory, &measured);
         for (stamp, pose) in poses {
             out.emit("trajectory", PoseStamped { stamp, pose }).await?;
         }

@@ -6,6 +6,7 @@ use squall_topology::BoxError;
 
 use super::Resampler;
 use crate::pf::shard::SlotReport;
+use crate::pf::trajectory::MeasuredStep;
 
 /// What one matcher task holds, as the resampler sees it.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -44,6 +45,8 @@ pub(super) struct Gathered {
     pub(super) update_work: u64,
     /// The reading's stamp and odometry.
     pub(super) mark: Option<(f64, Pose2)>,
+    /// The model's measurement of the step, from task 0.
+    pub(super) measured: Option<MeasuredStep>,
     /// (slot, pose) at the start.
     pub(super) starts: Vec<(usize, Pose2)>,
 }
