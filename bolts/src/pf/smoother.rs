@@ -26,6 +26,12 @@
 //! Where the matcher shows no error of its own (R near zero), the poses
 //! stay as they are.
 //!
+//! Where the model also measures each step itself (for SLAM, each
+//! processed scan matched against the one before: `Smoother::Scans`, the
+//! default), the three estimates of every step tell the noises apart
+//! directly (see [`three_way`]), which the growth model cannot where the
+//! lineage wanders slowly against its map.
+//!
 //! The result is the trajectory written out, not the filter's state: the
 //! particles, their maps and weights are untouched, and the smoother is a
 //! pure function of the lineage, so any number of matcher tasks writes

@@ -245,7 +245,9 @@ impl<M: HostedModel> Matcher<M> {
             self.best = n - 1;
             let slots = first..first + load[self.task];
             let shard = Shard::start(&self.model, self.task, self.seed, slots, &state, &reading.input);
-            self.previous_corrected = Some(reading.clone());
+            if self.task == 0 {
+                self.previous_corrected = Some(reading.clone());
+            }
             let poses = shard.poses(&self.model).into_iter().map(|(slot, p)| (slot as u32, p)).collect();
             self.shard = Some(shard);
             let (particles, settings) = (n as u32, self.settings());

@@ -373,8 +373,8 @@ impl Bolt for Resampler {
         let (Some(population), Some(settings)) = (&self.population, &self.settings) else {
             return Ok(());
         };
-        out.count("processed_scans", population.best_trajectory().len() as u64);
         let lineage = population.best_trajectory();
+        out.count("processed_scans", lineage.len() as u64);
         let measured = trajectory::measured_steps(&lineage, &self.measured);
         out.count("measured_steps", measured.iter().flatten().count() as u64);
         let poses = trajectory::fill(&lineage, &self.marks, settings.trajectory, &measured);
