@@ -124,6 +124,54 @@ fn copies_share_tiles_until_written() {
     assert_eq!(b.get((5, 0)).hits, 1);
 }
 
+/// Distinct tiles by brute force: every tile address, once.
+fn distinct_by_address(grids: &[&TiledGrid]) -> (usize, usize) {
+    let mut seen = std::collections::HashSet::new();
+    let bytes = grids
+        .iter()
+        .flat_map(|g| g.tiles.iter().flatten())
+        .filter(|t| seen.insert(Arc::as_ptr(t)))
+        .map(|t| t.bytes())
+        .sum();
+    (seen.len(), bytes)
+}
+
+#[test]
+fn distinct_tiles_counts_each_tile_once_however_the_grids_lie() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut root = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
+    for _ in 0..400 {
+        let c = (rng.random_range(-200..200), rng.random_range(-200..200));
+        root.update(c, |cell| cell.add_hit(0.0, 0.0));
+    }
+    // Copies that wrote here and there, one of them far off (its index
+    // grows), and a snapshot of a copy.
+    let mut grids = vec![root.clone(); 5];
+    for (k, g) in grids.iter_mut().enumerate() {
+        for _ in 0..20 * k {
+            let c = (rng.random_range(-300..300), rng.random_range(-300..300));
+            g.update(c, |cell| cell.visits += 1);
+        }
+    }
+    grids[4].update((9000, -4000), |cell| cell.visits += 1);
+    let snapshot = grids[2].clone();
+    grids[2].update((0, 0), |cell| cell.visits += 1);
+    grids.push(snapshot);
+    // A tile held in two places, as a transfer between processes may
+    // leave one.
+    let shared = grids[1].tiles.iter().flatten().next().cloned();
+    let empty = grids[1].tiles.iter().position(Option::is_none).expect("an empty place");
+    grids[1].tiles[empty] = shared;
+    let all: Vec<&TiledGrid> = std::iter::once(&root).chain(&grids).collect();
+    assert_eq!(TiledGrid::distinct_tiles(all.iter().copied()), distinct_by_address(&all));
+    // Grids too far apart for one box of places are counted the same way.
+    let mut far = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
+    far.update((1 << 40, 1 << 40), |cell| cell.visits += 1);
+    let with_far: Vec<&TiledGrid> = all.iter().copied().chain([&far]).collect();
+    assert_eq!(TiledGrid::distinct_tiles(with_far.iter().copied()), distinct_by_address(&with_far));
+    assert_eq!(TiledGrid::distinct_tiles([]), (0, 0));
+}
+
 #[test]
 fn exports_the_explored_area() {
     let mut g = TiledGrid::new(0.5, (10.0, 20.0)).unwrap();

@@ -229,6 +229,46 @@ fn the_wide_search_recovers_an_offset_the_climb_cannot() {
     assert!(climb.score < wide.score, "{} vs {}", climb.score, wide.score);
 }
 
+/// The wide search's grid as a plain scan in row order (heading, x, y)
+/// with the reference score: its first best pose.
+fn wide_grid_by_rows(grid: &TiledGrid, init: &Pose2, scan: &PreparedScan, o: &SlamOptions) -> Pose2 {
+    let (reach, turn, steps) = (0.3, 0.15, 3);
+    let mut coarse = PreparedScan::default();
+    scan.every_nth_into(WIDE_SEARCH_BEAM_STRIDE, &mut coarse);
+    let mut best = (Real::NEG_INFINITY, *init);
+    for a in -steps..=steps {
+        for i in -steps..=steps {
+            for j in -steps..=steps {
+                let f = |k: i32| Real::from(k) / Real::from(steps);
+                let pose = Pose2::new(init.x + reach * f(i), init.y + reach * f(j), init.theta + turn * f(a));
+                let s = reference_score(grid, &pose, &coarse, o);
+                if s > best.0 {
+                    best = (s, pose);
+                }
+            }
+        }
+    }
+    best.1
+}
+
+#[test]
+fn the_wide_search_finds_what_a_scan_in_row_order_finds() {
+    let (grid, truth, o, scan) = scene();
+    let mut matcher = Matcher::default();
+    for start in [Pose2::new(3.55, 1.45, 0.52), Pose2::new(3.1, 1.9, 0.3), truth] {
+        let wide = matcher.wide_search(&grid, &start, &scan, &o, 0.3, 0.15, 3);
+        let by_rows = wide_grid_by_rows(&grid, &start, &scan, &o);
+        let climbed = optimize(&grid, &by_rows, &scan, &o);
+        assert_eq!((wide.pose, wide.score), (climbed.pose, climbed.score), "from {start:?}");
+    }
+    // Where every pose ties (nothing mapped), the first in row order wins.
+    let nowhere = Pose2::new(500.0, 500.0, 0.0);
+    let wide = matcher.wide_search(&grid, &nowhere, &scan, &o, 0.3, 0.15, 3);
+    assert_eq!(wide.score, 0.0);
+    assert_eq!(wide.pose, wide_grid_by_rows(&grid, &nowhere, &scan, &o));
+    assert_eq!(wide.pose, Pose2::new(499.7, 499.7, -0.15));
+}
+
 #[test]
 fn a_reused_matcher_forgets_the_previous_map() {
     let (grid, truth, o, scan) = scene();
