@@ -81,6 +81,69 @@ pub fn propagate_motion(
     pose.compose(&d)
 }
 
+/// The standard deviations (x, y, θ) that a step's translation adds
+/// (GMapping's `srr` and `srt` terms of [`step_deviations`]).
+fn drive_deviations(d: &Pose2, o: &MotionNoise) -> [Real; 3] {
+    let sxy = 0.3 * o.srr;
+    [o.srr * d.x.abs() + sxy * d.y.abs(), o.srr * d.y.abs() + sxy * d.x.abs(), o.srt * d.x.hypot(d.y)]
+}
+
+/// The uncertainty of an odometry prediction since some pose (world frame
+/// x, y, θ), with the error of turning systematic and that of driving
+/// drawn afresh at every reading.
+///
+/// A differential drive misjudges a turn by its wheel base and by the
+/// wheels' slip, which bias every reading of one turn the same way, so a
+/// turn's standard deviations add over its readings: a quarter turn
+/// reported in forty readings is as uncertain as one reported in one.
+/// With each reading's noise drawn afresh, as GMapping's model does, it
+/// would be √40 times surer, and a robot whose odometry under-reports its
+/// turns by a fifth ends one many deviations off. The turn's heading error
+/// is `turn_error` per radian turned, its position error `str` per radian
+/// (GMapping's); the error of driving keeps GMapping's model (`srr`,
+/// `srt`), whose defaults are set for it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct MotionSpread {
+    /// The turns' error: a matrix `A` that maps one standard-normal draw
+    /// per component to the prediction's error (covariance `A Aᵀ`).
+    pub turn: Mat3,
+    /// The driving's error: its covariance.
+    pub drive: Mat3,
+}
+
+impl MotionSpread {
+    /// `pose` moved by the odometry step `old → new` without noise, and
+    /// the spread grown by the step: the error so far carried through it
+    /// (a heading error swings the translation), plus the step's own.
+    pub fn propagate(
+        &mut self,
+        pose: &Pose2,
+        old: &Pose2,
+        new: &Pose2,
+        o: &MotionNoise,
+        turn_error: Real,
+    ) -> Pose2 {
+        let d = new.relative_to(old);
+        let (s, c) = pose.theta.sin_cos();
+        // ∂(pose ⊕ d)/∂pose and ∂(pose ⊕ (d + n))/∂n.
+        let f = [[1.0, 0.0, -(s * d.x + c * d.y)], [0.0, 1.0, c * d.x - s * d.y], [0.0, 0.0, 1.0]];
+        let g = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+        let turn = d.theta.abs();
+        let deviations = diagonal([o.str * turn, o.str * turn, turn_error * turn]);
+        self.turn = add(&mul(&f, &self.turn), &mul(&g, &deviations));
+        let [dx, dy, dt] = drive_deviations(&d, o);
+        let carried = mul(&mul(&f, &self.drive), &transpose(&f));
+        let added = mul(&mul(&g, &diagonal([dx * dx, dy * dy, dt * dt])), &transpose(&g));
+        self.drive = symmetric(&add(&carried, &added));
+        pose.compose(&d)
+    }
+
+    /// The prediction's covariance.
+    pub fn covariance(&self) -> Mat3 {
+        symmetric(&add(&mul(&self.turn, &transpose(&self.turn)), &self.drive))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -151,5 +214,62 @@ mod tests {
         }
         let m = |k: usize| ends.iter().map(|p| v(p)[k]).sum::<Real>() / n as Real;
         assert!(m(0).abs() < 0.01 && m(1).abs() < 0.01 && m(2).abs() < 0.01);
+    }
+
+    /// The covariances of `total` reported in `n` readings: by
+    /// [`MotionSpread`] with GMapping's `stt` as the turn error, and by
+    /// [`propagate_motion`].
+    fn spread_over(total: &Pose2, n: usize, o: &MotionNoise) -> (Mat3, Mat3) {
+        let start = Pose2::new(1.0, 2.0, 0.4);
+        let step = Pose2::new(total.x / n as Real, total.y / n as Real, total.theta / n as Real);
+        let odometry: Vec<Pose2> =
+            (0..=n).scan(start, |p, _| Some(std::mem::replace(p, p.compose(&step)))).collect();
+        let (mut spread, mut cov, mut pose) = (MotionSpread::default(), ZERO, start);
+        for w in odometry.windows(2) {
+            propagate_motion(&pose, &mut cov, &w[0], &w[1], o);
+            pose = spread.propagate(&pose, &w[0], &w[1], o, o.stt);
+        }
+        (spread.covariance(), cov)
+    }
+
+    #[test]
+    fn a_turns_spread_does_not_depend_on_how_often_odometry_arrives() {
+        let quarter = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let [_, _, st] = step_deviations(&quarter, &GMAPPING);
+        let (once, _) = spread_over(&quarter, 1, &GMAPPING);
+        let (forty, fresh) = spread_over(&quarter, 40, &GMAPPING);
+        assert!((once[2][2].sqrt() - st).abs() < 1e-12, "one reading: the step's σθ");
+        assert!((forty[2][2].sqrt() - st).abs() < 1e-9, "forty readings: {}", forty[2][2].sqrt());
+        // Each reading's noise drawn afresh: √40 times surer.
+        assert!((fresh[2][2].sqrt() * 40f64.sqrt() - st).abs() < 1e-9);
+    }
+
+    #[test]
+    fn driving_straight_keeps_gmappings_model() {
+        let drive = Pose2::new(2.0, 0.0, 0.0);
+        for n in [1, 40] {
+            let (spread, cov) = spread_over(&drive, n, &GMAPPING);
+            for i in 0..3 {
+                for j in 0..3 {
+                    assert!((spread[i][j] - cov[i][j]).abs() < 1e-12, "n {n} ({i},{j})");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_turns_heading_error_swings_a_later_drive() {
+        // A turn, then a noiseless drive of 3 m: across the drive, the
+        // turn's 0.1 m plus 3 m times its 0.2 rad.
+        let turn_only = MotionNoise { srr: 0.0, srt: 0.0, str: 0.1, stt: 0.0 };
+        let turn = (Pose2::new(0.0, 0.0, 0.0), Pose2::new(0.0, 0.0, 1.0));
+        let drive = (turn.1, turn.1.compose(&Pose2::new(3.0, 0.0, 0.0)));
+        let mut spread = MotionSpread::default();
+        let p = spread.propagate(&Pose2::new(0.0, 0.0, 0.0), &turn.0, &turn.1, &turn_only, 0.2);
+        spread.propagate(&p, &drive.0, &drive.1, &turn_only, 0.2);
+        let cov = spread.covariance();
+        let (s, c) = 1f64.sin_cos();
+        let across = (s * s * cov[0][0] - 2.0 * s * c * cov[0][1] + c * c * cov[1][1]).sqrt();
+        assert!((across - (0.1f64.powi(2) + 0.6f64.powi(2)).sqrt()).abs() < 1e-9, "{across}");
     }
 }

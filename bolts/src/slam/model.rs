@@ -13,10 +13,11 @@ use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::old_map::{MapHistory, search_old_map};
 use crate::slam::options::{Proposal, SlamOptions};
-use crate::slam::proposal::draw;
-use squall_core::covariance::{Mat3, ZERO, scale};
+use crate::slam::proposal::{MOTION_FLOOR, draw};
+use squall_core::covariance::{add, apply, cholesky, diagonal, scale};
 use squall_core::geometry::{Pose2, Real, normalize_angle};
-use squall_core::motion::{propagate_motion, sample_motion};
+use squall_core::motion::{MotionSpread, sample_motion};
+use squall_core::random::standard_normal;
 use squall_core::sensor::LaserReading;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
@@ -38,13 +39,9 @@ pub struct SlamParticle {
     pub map: TiledGrid,
     /// Snapshots of the map for the old-map search.
     pub history: MapHistory,
-    /// Covariance of the odometry's prediction since the last correcting
-    /// reading (world frame x, y, θ), for the Gaussian proposal.
-    pub motion: Mat3,
-    /// Where the Gaussian proposal's climb starts: the prediction with the
-    /// motion model's noise drawn, as GMapping's; `None` right after a
-    /// correction.
-    pub noisy: Option<Pose2>,
+    /// The uncertainty of the odometry's prediction since the last
+    /// correcting reading, for the Gaussian proposal.
+    pub spread: MotionSpread,
 }
 
 impl SlamParticle {
@@ -128,7 +125,13 @@ impl ParticleModel for SlamModel {
         integrate_scan(&mut map, &first.odometry, first, o.max_urange);
         map.take_clone_count();
         let pose = first.odometry;
-        SlamParticle { pose, estimate: pose, map, history: MapHistory::default(), motion: ZERO, noisy: None }
+        SlamParticle {
+            pose,
+            estimate: pose,
+            map,
+            history: MapHistory::default(),
+            spread: MotionSpread::default(),
+        }
     }
 
     fn mark(&self, input: &LaserReading) -> (f64, Pose2) {
@@ -154,13 +157,10 @@ impl ParticleModel for SlamModel {
         let noise = self.options.motion_noise();
         p.pose = match self.options.proposal {
             Proposal::Climb => sample_motion(&p.pose, &step.from, &step.to, &noise, rng),
+            // The noise-free prediction and its spread; the noise is drawn
+            // at the correction (see `correct`).
             Proposal::Gaussian => {
-                // The climb starts from a noisy draw, so that relatives
-                // explore different modes; the draw's prior is the
-                // noise-free prediction and its covariance.
-                let from = p.noisy.unwrap_or(p.pose);
-                p.noisy = Some(sample_motion(&from, &step.from, &step.to, &noise, rng));
-                propagate_motion(&p.pose, &mut p.motion, &step.from, &step.to, &noise)
+                p.spread.propagate(&p.pose, &step.from, &step.to, &noise, self.options.turn_error)
             }
         };
         p.estimate = p.pose;
@@ -180,7 +180,16 @@ impl ParticleModel for SlamModel {
         let o = &self.options;
         let SlamScratch { prepared, matcher } = scratch;
         let prepared = prepared.get_or_insert_with(|| PreparedScan::new(input, o));
-        let start = p.noisy.take().unwrap_or(p.pose);
+        let start = match o.proposal {
+            Proposal::Climb => p.pose,
+            // The climb starts from the prediction with the motion's noise
+            // drawn, so that relatives explore different modes.
+            Proposal::Gaussian => {
+                let e = [standard_normal(rng), standard_normal(rng), standard_normal(rng)];
+                let n = apply(&cholesky(&add(&p.spread.covariance(), &diagonal([MOTION_FLOOR; 3]))), e);
+                Pose2::new(p.pose.x + n[0], p.pose.y + n[1], normalize_angle(p.pose.theta + n[2]))
+            }
+        };
         let climbed = matcher.refine(&p.map, &start, prepared, o);
         let m = search_old_map(matcher, &p.map, &p.history, climbed, prepared, o);
         let fit = m.log_likelihood * prepared.per_beam();
@@ -194,10 +203,10 @@ impl ParticleModel for SlamModel {
             Proposal::Gaussian => {
                 let information =
                     scale(&matcher.information(&p.map, &m.pose, prepared, o), prepared.per_beam());
-                let drawn = draw(&m.pose, &information, &p.pose, &p.motion, rng);
+                let drawn = draw(&m.pose, &information, &p.pose, &p.spread.covariance(), rng);
                 p.pose = drawn.pose;
                 p.estimate = drawn.mean;
-                p.motion = ZERO;
+                p.spread = MotionSpread::default();
                 let log_likelihood = fit + drawn.log_agreement;
                 Correction { log_likelihood, evaluations: m.evaluations, fit }
             }

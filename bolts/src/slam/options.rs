@@ -61,11 +61,12 @@ pub enum Proposal {
     /// which becomes the pose.
     Climb,
     /// The improved proposal in closed form ([`crate::slam::proposal`]):
-    /// the matcher climbs from a noisy draw as GMapping's does (relatives
-    /// explore different modes), then the pose is drawn from the product
-    /// of the scan's Gaussian (its information matrix at the mode) and
-    /// the motion model's around the odometry's noise-free prediction; the
-    /// weight gains how well the two agree.
+    /// the matcher climbs from a draw of the odometry's prediction with
+    /// its uncertainty (relatives explore different modes; a turn's error
+    /// is systematic, see `turn_error`), then the pose is drawn from the
+    /// product of the scan's Gaussian (its information matrix at the mode)
+    /// and the motion model's around the odometry's noise-free
+    /// prediction; the weight gains how well the two agree.
     Gaussian,
 }
 
@@ -110,8 +111,17 @@ pub struct SlamOptions {
     pub srt: Real,
     /// Translation noise per radian of rotation. The default is 0.1.
     pub str: Real,
-    /// Rotation noise per radian of rotation. The default is 0.2.
+    /// Rotation noise per radian of rotation, drawn afresh at every
+    /// reading: GMapping's proposal's (the Gaussian proposal's is
+    /// `turn_error`). The default is 0.2.
     pub stt: Real,
+    /// How far the odometry may be off about a turn, as a share of the
+    /// turn (one standard deviation), with the Gaussian proposal. The
+    /// error is systematic over the readings between two corrections (a
+    /// wheel base misjudged, wheels slipping through the turn), so it
+    /// does not shrink when the odometry reports more often, as `stt`'s
+    /// does (see `squall_core::motion::MotionSpread`). The default is 0.1.
+    pub turn_error: Real,
     /// Process a scan after this much travel, metres. The default is 1.0.
     pub linear_update: Real,
     /// ...or this much turning, radians. The default is 0.5.
@@ -195,6 +205,7 @@ impl Default for SlamOptions {
             srt: 0.2,
             str: 0.1,
             stt: 0.2,
+            turn_error: 0.1,
             linear_update: 1.0,
             angular_update: 0.5,
             resample_threshold: 0.5,
@@ -247,6 +258,7 @@ impl SlamOptions {
             ("srt", self.srt),
             ("str", self.str),
             ("stt", self.stt),
+            ("turn_error", self.turn_error),
             ("linear_update", self.linear_update),
             ("angular_update", self.angular_update),
             ("wide_search_below", self.wide_search_below),

@@ -20,7 +20,7 @@ use squall_core::random::standard_normal;
 /// Variance added to the motion's covariance so that it can be inverted
 /// when the robot has barely moved (m², rad²): a millimetre, a few
 /// hundredths of a degree.
-const MOTION_FLOOR: Real = 1e-6;
+pub(crate) const MOTION_FLOOR: Real = 1e-6;
 
 /// A particle's draw from the proposal.
 #[derive(Debug, Clone, Copy, PartialEq)]

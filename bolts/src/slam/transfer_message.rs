@@ -6,8 +6,8 @@
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
-use squall_core::covariance::Mat3;
 use squall_core::geometry::Pose2;
+use squall_core::motion::MotionSpread;
 use squall_core::sensor::LaserReading;
 use squall_topology::{CodecError, Incremental};
 
@@ -37,8 +37,7 @@ struct PackedParticle {
     updates: u64,
     recent: Option<PackedGrid>,
     old: Option<PackedGrid>,
-    motion: Mat3,
-    noisy: Option<Pose2>,
+    spread: MotionSpread,
 }
 
 impl PackedParticle {
@@ -54,8 +53,7 @@ impl PackedParticle {
             updates: p.history.updates,
             recent,
             old,
-            motion: p.motion,
-            noisy: p.noisy,
+            spread: p.spread,
         }
     }
 
@@ -66,14 +64,7 @@ impl PackedParticle {
         let history = MapHistory { updates: self.updates, recent, old };
         Ok((
             self.slot,
-            SlamParticle {
-                pose: self.pose,
-                estimate: self.estimate,
-                map,
-                history,
-                motion: self.motion,
-                noisy: self.noisy,
-            },
+            SlamParticle { pose: self.pose, estimate: self.estimate, map, history, spread: self.spread },
         ))
     }
 }
@@ -109,10 +100,12 @@ mod tests {
         for i in 0..walls {
             map.update((i, 10), |c| c.add_hit(i as f32 * 0.05, 0.5));
         }
-        let motion = [[0.01, 0.0, 0.001], [0.0, 0.02, 0.0], [0.001, 0.0, 0.003]];
-        let noisy = Some(Pose2::new(x + 0.1, 0.05, 0.12));
+        let spread = MotionSpread {
+            turn: [[0.01, 0.0, 0.001], [0.0, 0.02, 0.0], [0.001, 0.0, 0.003]],
+            drive: [[0.02, 0.001, 0.0], [0.001, 0.03, 0.0], [0.0, 0.0, 0.004]],
+        };
         let (pose, estimate) = (Pose2::new(x, 0.0, 0.1), Pose2::new(x, 0.01, 0.1));
-        SlamParticle { pose, estimate, map, history: MapHistory::default(), motion, noisy }
+        SlamParticle { pose, estimate, map, history: MapHistory::default(), spread }
     }
 
     #[test]
@@ -126,7 +119,7 @@ mod tests {
         assert_eq!(back.step, 3);
         assert_eq!(back.states.iter().map(|s| s.0).collect::<Vec<_>>(), vec![0, 5]);
         assert_eq!((back.states[1].1.pose, back.states[1].1.estimate), (parent.pose, parent.estimate));
-        assert_eq!((back.states[1].1.motion, back.states[1].1.noisy), (parent.motion, parent.noisy));
+        assert_eq!(back.states[1].1.spread, parent.spread);
         assert_eq!(back.states[1].1.map.get((7, 10)), parent.map.get((7, 10)));
         let plain = postcard::to_stdvec(&first).unwrap().len();
         // The second state refers to the first's tiles.
