@@ -255,3 +255,35 @@ impl ParticleModel for SlamModel {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::slam::scenes::{room, scan_of};
+    use rand::SeedableRng;
+
+    /// The heading deviation of a particle's prediction after a half
+    /// radian turned on the spot in `readings` odometry readings.
+    fn turn_deviation(options: SlamOptions, readings: usize) -> Real {
+        let model = SlamModel::new(options).unwrap();
+        let mut p = model.start(&scan_of(&room(), &Pose2::new(3.0, 2.0, 0.0)));
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let at = |i: usize| Pose2::new(0.0, 0.0, 0.5 * i as Real / readings as Real);
+        for i in 0..readings {
+            model.predict(&mut p, &OdometryStep { stamp: i as f64, from: at(i), to: at(i + 1) }, &mut rng);
+        }
+        p.spread.covariance()[2][2].sqrt()
+    }
+
+    #[test]
+    fn a_turn_is_as_uncertain_whatever_the_odometrys_rate() {
+        let o = SlamOptions::default();
+        let expected = o.turn_error * 0.5;
+        for readings in [1, 40] {
+            let deviation = turn_deviation(o.clone(), readings);
+            assert!((deviation - expected).abs() < 1e-9, "{readings} readings: {deviation} vs {expected}");
+        }
+        let doubled = turn_deviation(SlamOptions { turn_error: 0.2, ..o }, 40);
+        assert!((doubled - 2.0 * expected).abs() < 1e-9, "the setting scales it: {doubled}");
+    }
+}
