@@ -55,6 +55,16 @@ pub fn sample_motion<R: Rng + ?Sized>(
     pose.compose(&Pose2::new(x, y, normalize_angle(theta)))
 }
 
+/// For `pose ⊕ d`: its Jacobian in `pose` (how an earlier error is
+/// carried through the step) and in noise added to `d` (the step's own
+/// error turned into the world frame).
+fn step_jacobians(pose: &Pose2, d: &Pose2) -> (Mat3, Mat3) {
+    let (s, c) = pose.theta.sin_cos();
+    let f = [[1.0, 0.0, -(s * d.x + c * d.y)], [0.0, 1.0, c * d.x - s * d.y], [0.0, 0.0, 1.0]];
+    let g = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    (f, g)
+}
+
 /// `pose` moved by the odometry step `old → new` without noise, and
 /// `covariance` (world frame, x, y, θ) grown by the step: the earlier
 /// uncertainty carried through the step (a heading error swings the
@@ -69,10 +79,7 @@ pub fn propagate_motion(
     o: &MotionNoise,
 ) -> Pose2 {
     let d = new.relative_to(old);
-    let (s, c) = pose.theta.sin_cos();
-    // ∂(pose ⊕ d)/∂pose and ∂(pose ⊕ (d + n))/∂n.
-    let f = [[1.0, 0.0, -(s * d.x + c * d.y)], [0.0, 1.0, c * d.x - s * d.y], [0.0, 0.0, 1.0]];
-    let g = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    let (f, g) = step_jacobians(pose, &d);
     let [sx, sy, st] = step_deviations(&d, o);
     let q = diagonal([sx * sx, sy * sy, st * st]);
     let carried = mul(&mul(&f, covariance), &transpose(&f));
@@ -124,10 +131,7 @@ impl MotionSpread {
         turn_error: Real,
     ) -> Pose2 {
         let d = new.relative_to(old);
-        let (s, c) = pose.theta.sin_cos();
-        // ∂(pose ⊕ d)/∂pose and ∂(pose ⊕ (d + n))/∂n.
-        let f = [[1.0, 0.0, -(s * d.x + c * d.y)], [0.0, 1.0, c * d.x - s * d.y], [0.0, 0.0, 1.0]];
-        let g = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+        let (f, g) = step_jacobians(pose, &d);
         let turn = d.theta.abs();
         let deviations = diagonal([o.str * turn, o.str * turn, turn_error * turn]);
         self.turn = add(&mul(&f, &self.turn), &mul(&g, &deviations));

@@ -13,11 +13,10 @@ use crate::slam::integrate::integrate_scan;
 use crate::slam::matcher::{Matcher, PreparedScan};
 use crate::slam::old_map::{MapHistory, search_old_map};
 use crate::slam::options::{Proposal, SlamOptions};
-use crate::slam::proposal::{MOTION_FLOOR, draw};
-use squall_core::covariance::{add, apply, cholesky, diagonal, scale};
+use crate::slam::proposal::{draw, noisy_start};
+use squall_core::covariance::scale;
 use squall_core::geometry::{Pose2, Real, normalize_angle};
 use squall_core::motion::{MotionSpread, sample_motion};
-use squall_core::random::standard_normal;
 use squall_core::sensor::LaserReading;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
@@ -180,15 +179,10 @@ impl ParticleModel for SlamModel {
         let o = &self.options;
         let SlamScratch { prepared, matcher } = scratch;
         let prepared = prepared.get_or_insert_with(|| PreparedScan::new(input, o));
+        let motion = p.spread.covariance();
         let start = match o.proposal {
             Proposal::Climb => p.pose,
-            // The climb starts from the prediction with the motion's noise
-            // drawn, so that relatives explore different modes.
-            Proposal::Gaussian => {
-                let e = [standard_normal(rng), standard_normal(rng), standard_normal(rng)];
-                let n = apply(&cholesky(&add(&p.spread.covariance(), &diagonal([MOTION_FLOOR; 3]))), e);
-                Pose2::new(p.pose.x + n[0], p.pose.y + n[1], normalize_angle(p.pose.theta + n[2]))
-            }
+            Proposal::Gaussian => noisy_start(&p.pose, &motion, rng),
         };
         let climbed = matcher.refine(&p.map, &start, prepared, o);
         let m = search_old_map(matcher, &p.map, &p.history, climbed, prepared, o);
@@ -203,7 +197,7 @@ impl ParticleModel for SlamModel {
             Proposal::Gaussian => {
                 let information =
                     scale(&matcher.information(&p.map, &m.pose, prepared, o), prepared.per_beam());
-                let drawn = draw(&m.pose, &information, &p.pose, &p.spread.covariance(), rng);
+                let drawn = draw(&m.pose, &information, &p.pose, &motion, rng);
                 p.pose = drawn.pose;
                 p.estimate = drawn.mean;
                 p.spread = MotionSpread::default();

@@ -20,7 +20,7 @@ use squall_core::random::standard_normal;
 /// Variance added to the motion's covariance so that it can be inverted
 /// when the robot has barely moved (m², rad²): a millimetre, a few
 /// hundredths of a degree.
-pub(crate) const MOTION_FLOOR: Real = 1e-6;
+const MOTION_FLOOR: Real = 1e-6;
 
 /// A particle's draw from the proposal.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -33,6 +33,15 @@ pub(crate) struct Drawn {
     /// matched pose: how well odometry and scan agree (≤ 0 up to the
     /// determinant term).
     pub log_agreement: Real,
+}
+
+/// Where a particle's climb starts: `predicted` with the motion's noise
+/// (covariance `motion`, world frame x, y, θ) drawn, so that relatives
+/// explore different modes.
+pub(crate) fn noisy_start<R: Rng + ?Sized>(predicted: &Pose2, motion: &Mat3, rng: &mut R) -> Pose2 {
+    let e = [standard_normal(rng), standard_normal(rng), standard_normal(rng)];
+    let n = apply(&cholesky(&add(motion, &diagonal([MOTION_FLOOR; 3]))), e);
+    Pose2::new(predicted.x + n[0], predicted.y + n[1], normalize_angle(predicted.theta + n[2]))
 }
 
 /// Draws a pose from the product of the scan's Gaussian (mean `matched`,
