@@ -40,6 +40,14 @@ impl LaserReading {
     pub fn beam_angle(&self, i: usize) -> Real {
         self.angle_min + i as Real * self.angle_increment
     }
+
+    /// Where beam `i` ends, in the robot's frame (whether or not it
+    /// measured something: see [`Self::is_valid`]).
+    pub fn end_point(&self, i: usize) -> (Real, Real) {
+        let (r, a) = (Real::from(self.ranges[i]), self.beam_angle(i));
+        let p = self.laser_offset.compose(&Pose2::new(r * a.cos(), r * a.sin(), 0.0));
+        (p.x, p.y)
+    }
 }
 
 /// An odometry pose on its own (between scans).
@@ -83,5 +91,26 @@ mod tests {
         let valid: Vec<bool> = (0..5).map(|i| r.is_valid(i)).collect();
         assert_eq!(valid, [false, true, false, false, false]);
         assert!((r.beam_angle(4) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_beams_end_point_is_in_the_robots_frame() {
+        // A laser 0.2 m ahead of the robot's centre, turned left by 90°:
+        // its beam straight ahead (index 2, angle 0) ends 1 m to the
+        // robot's left of the laser.
+        let r = LaserReading {
+            stamp: 0.0,
+            ranges: vec![1.0; 5],
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: std::f64::consts::PI / 4.0,
+            range_min: 0.0,
+            range_max: 50.0,
+            odometry: Pose2::IDENTITY,
+            laser_offset: Pose2::new(0.2, 0.0, std::f64::consts::FRAC_PI_2),
+        };
+        let (x, y) = r.end_point(2);
+        assert!((x - 0.2).abs() < 1e-12 && (y - 1.0).abs() < 1e-12, "({x}, {y})");
+        let (x, y) = r.end_point(0);
+        assert!((x - 1.2).abs() < 1e-12 && y.abs() < 1e-12, "({x}, {y})");
     }
 }

@@ -37,11 +37,7 @@ impl Observation2d {
         let n = scan.ranges.len();
         let point = |i: usize| -> Option<(Real, Real)> {
             let r = Real::from(scan.ranges[i]);
-            (scan.is_valid(i) && r <= max_range).then(|| {
-                let a = scan.beam_angle(i);
-                let p = scan.laser_offset.compose(&Pose2::new(r * a.cos(), r * a.sin(), 0.0));
-                (p.x, p.y)
-            })
+            (scan.is_valid(i) && r <= max_range).then(|| scan.end_point(i))
         };
         let sensor = (scan.laser_offset.x, scan.laser_offset.y);
         let mut out = Observation2d { stamp: scan.stamp, odometry: scan.odometry, sensor, ..Self::default() };

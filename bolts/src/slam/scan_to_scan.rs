@@ -171,14 +171,7 @@ impl Reference {
 
 /// The returning beams' end points of `scan` in the robot's frame.
 fn points_of(scan: &LaserReading) -> Vec<(Real, Real)> {
-    (0..scan.ranges.len())
-        .filter(|&i| scan.is_valid(i))
-        .map(|i| {
-            let (r, a) = (Real::from(scan.ranges[i]), scan.beam_angle(i));
-            let p = scan.laser_offset.compose(&Pose2::new(r * a.cos(), r * a.sin(), 0.0));
-            (p.x, p.y)
-        })
-        .collect()
+    (0..scan.ranges.len()).filter(|&i| scan.is_valid(i)).map(|i| scan.end_point(i)).collect()
 }
 
 /// The motion of the robot from `from` to `to` (in `from`'s frame) that
