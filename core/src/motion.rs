@@ -11,6 +11,9 @@ use crate::covariance::{Mat3, add, diagonal, mul, symmetric, transpose};
 use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::random::standard_normal;
 
+mod turn_error;
+pub use turn_error::{PRIOR_TURNS, TurnErrorEstimate, TurnErrorPrior};
+
 /// The motion model's noise: how much translation and rotation error one
 /// metre of travel and one radian of turning add (GMapping's srr, srt, str,
 /// stt).
@@ -116,6 +119,11 @@ pub struct MotionSpread {
     pub turn: Mat3,
     /// The driving's error: its covariance.
     pub drive: Mat3,
+    /// The odometry's turning since the spread began (sum of its
+    /// absolute turns, radians).
+    pub turned: Real,
+    /// ...and its driving, metres.
+    pub driven: Real,
 }
 
 impl MotionSpread {
@@ -139,6 +147,8 @@ impl MotionSpread {
         let carried = mul(&mul(&f, &self.drive), &transpose(&f));
         let added = mul(&mul(&g, &diagonal([dx * dx, dy * dy, dt * dt])), &transpose(&g));
         self.drive = symmetric(&add(&carried, &added));
+        self.turned += turn;
+        self.driven += d.x.hypot(d.y);
         pose.compose(&d)
     }
 

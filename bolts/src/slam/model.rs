@@ -16,7 +16,7 @@ use crate::slam::options::{Proposal, SlamOptions};
 use crate::slam::proposal::{draw, noisy_start};
 use squall_core::covariance::scale;
 use squall_core::geometry::{Pose2, Real, normalize_angle};
-use squall_core::motion::{MotionSpread, sample_motion};
+use squall_core::motion::{MotionSpread, TurnErrorEstimate, TurnErrorPrior, sample_motion};
 use squall_core::sensor::LaserReading;
 
 /// One SLAM hypothesis: where the robot is and the map built along the
@@ -41,6 +41,8 @@ pub struct SlamParticle {
     /// The uncertainty of the odometry's prediction since the last
     /// correcting reading, for the Gaussian proposal.
     pub spread: MotionSpread,
+    /// What the lineage's corrections say of the odometry's turn error.
+    pub turns: TurnErrorEstimate,
 }
 
 impl SlamParticle {
@@ -103,6 +105,23 @@ impl SlamModel {
     pub fn options(&self) -> &SlamOptions {
         &self.options
     }
+
+    /// What a lineage's turn error is learned from: the configured one,
+    /// over turns of the update angle; headings within the climb's first
+    /// angular step are the matcher's to resolve, never clipped.
+    fn turn_prior(&self) -> TurnErrorPrior {
+        let o = &self.options;
+        TurnErrorPrior { turn_error: o.turn_error, turn: o.angular_update, resolution: o.astep }
+    }
+
+    /// The turn error `p`'s prediction is spread with.
+    pub fn turn_error(&self, p: &SlamParticle) -> Real {
+        if self.options.learn_turn_error {
+            p.turns.turn_error(&self.turn_prior())
+        } else {
+            self.options.turn_error
+        }
+    }
 }
 
 impl ParticleModel for SlamModel {
@@ -130,6 +149,7 @@ impl ParticleModel for SlamModel {
             map,
             history: MapHistory::default(),
             spread: MotionSpread::default(),
+            turns: TurnErrorEstimate::default(),
         }
     }
 
@@ -159,7 +179,8 @@ impl ParticleModel for SlamModel {
             // The noise-free prediction and its spread; the noise is drawn
             // at the correction (see `correct`).
             Proposal::Gaussian => {
-                p.spread.propagate(&p.pose, &step.from, &step.to, &noise, self.options.turn_error)
+                let turn_error = self.turn_error(p);
+                p.spread.propagate(&p.pose, &step.from, &step.to, &noise, turn_error)
             }
         };
         p.estimate = p.pose;
@@ -198,6 +219,11 @@ impl ParticleModel for SlamModel {
                 let information =
                     scale(&matcher.information(&p.map, &m.pose, prepared, o), prepared.per_beam());
                 let drawn = draw(&m.pose, &information, &p.pose, &motion, rng);
+                if o.learn_turn_error {
+                    let heading_error = normalize_angle(m.pose.theta - p.pose.theta);
+                    let prior = self.turn_prior();
+                    p.turns.observe(p.spread.turned, p.spread.driven, heading_error, &prior);
+                }
                 p.pose = drawn.pose;
                 p.estimate = drawn.mean;
                 p.spread = MotionSpread::default();
@@ -279,5 +305,59 @@ mod tests {
         }
         let doubled = turn_deviation(SlamOptions { turn_error: 0.2, ..o }, 40);
         assert!((doubled - 2.0 * expected).abs() < 1e-9, "the setting scales it: {doubled}");
+    }
+}
+
+#[cfg(test)]
+mod learning {
+    use super::*;
+    use crate::slam::scenes::{room, scan_of};
+    use rand::SeedableRng;
+
+    /// The turn error one particle has learned after turning on the spot
+    /// in the room, `turns` corrections of 0.6 rad each in six readings,
+    /// its odometry reporting `reported` of every turn.
+    fn learned_turn_error(reported: Real, turns: usize) -> Real {
+        let model = SlamModel::new(SlamOptions::default()).unwrap();
+        let world = room();
+        let truth = |k: usize| Pose2::new(3.0, 2.0, normalize_angle(0.1 * k as Real));
+        let odometry = |k: usize| Pose2::new(0.0, 0.0, normalize_angle(0.1 * reported * k as Real));
+        let mut p = model.start(&scan_of(&world, &Pose2::new(3.0, 2.0, 0.0)));
+        let (mut rng, mut scratch) = (ChaCha8Rng::seed_from_u64(7), SlamScratch::default());
+        for turn in 0..turns {
+            for k in 6 * turn..6 * (turn + 1) {
+                let step = OdometryStep { stamp: k as f64, from: odometry(k), to: odometry(k + 1) };
+                model.predict(&mut p, &step, &mut rng);
+            }
+            let k = 6 * (turn + 1);
+            let reading = LaserReading { odometry: odometry(k), ..scan_of(&world, &truth(k)) };
+            model.prepare(&reading, &mut scratch);
+            model.correct(&mut p, &reading, &mut scratch, &mut rng);
+            model.update(&mut p, &reading);
+        }
+        model.turn_error(&p)
+    }
+
+    #[test]
+    fn a_particle_learns_how_far_its_odometry_misjudges_turns() {
+        // Turns under-reported by a fifth: each correction finds the
+        // heading a quarter of the reported turn further on.
+        let under = learned_turn_error(0.8, 40);
+        assert!((under - 0.25).abs() < 0.05, "{under}");
+        // Exact odometry: the prior's 0.1 gives way to what the matcher
+        // finds, a small fraction of it.
+        let exact = learned_turn_error(1.0, 40);
+        assert!(exact < 0.05, "{exact}");
+        // Before any correction, the setting.
+        assert!((learned_turn_error(0.8, 0) - SlamOptions::default().turn_error).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_fixed_turn_error_is_kept() {
+        let model =
+            SlamModel::new(SlamOptions { learn_turn_error: false, ..SlamOptions::default() }).unwrap();
+        let mut p = model.start(&scan_of(&room(), &Pose2::new(3.0, 2.0, 0.0)));
+        p.turns.observe(0.5, 0.0, 0.2, &model.turn_prior());
+        assert_eq!(model.turn_error(&p), model.options().turn_error);
     }
 }

@@ -120,8 +120,16 @@ pub struct SlamOptions {
     /// error is systematic over the readings between two corrections (a
     /// wheel base misjudged, wheels slipping through the turn), so it
     /// does not shrink when the odometry reports more often, as `stt`'s
-    /// does (see `squall_core::motion::MotionSpread`). The default is 0.1.
+    /// does (see `squall_core::motion::MotionSpread`). With
+    /// `learn_turn_error`, the value a run starts from, worth ten turns
+    /// of `angular_update`. The default is 0.1.
     pub turn_error: Real,
+    /// Each particle learns its robot's turn error from its lineage's
+    /// corrections (the heading each matched against the odometry's
+    /// prediction, over the turning and driving between), starting from
+    /// `turn_error` (`squall_core::motion::TurnErrorEstimate`); `false`
+    /// keeps `turn_error` fixed. The default is `true`.
+    pub learn_turn_error: bool,
     /// Process a scan after this much travel, metres. The default is 1.0.
     pub linear_update: Real,
     /// ...or this much turning, radians. The default is 0.5.
@@ -206,6 +214,7 @@ impl Default for SlamOptions {
             str: 0.1,
             stt: 0.2,
             turn_error: 0.1,
+            learn_turn_error: true,
             linear_update: 1.0,
             angular_update: 0.5,
             resample_threshold: 0.5,

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 use squall_core::geometry::Pose2;
-use squall_core::motion::MotionSpread;
+use squall_core::motion::{MotionSpread, TurnErrorEstimate};
 use squall_core::sensor::LaserReading;
 use squall_topology::{CodecError, Incremental};
 
@@ -38,6 +38,7 @@ struct PackedParticle {
     recent: Option<PackedGrid>,
     old: Option<PackedGrid>,
     spread: MotionSpread,
+    turns: TurnErrorEstimate,
 }
 
 impl PackedParticle {
@@ -54,6 +55,7 @@ impl PackedParticle {
             recent,
             old,
             spread: p.spread,
+            turns: p.turns,
         }
     }
 
@@ -64,7 +66,14 @@ impl PackedParticle {
         let history = MapHistory { updates: self.updates, recent, old };
         Ok((
             self.slot,
-            SlamParticle { pose: self.pose, estimate: self.estimate, map, history, spread: self.spread },
+            SlamParticle {
+                pose: self.pose,
+                estimate: self.estimate,
+                map,
+                history,
+                spread: self.spread,
+                turns: self.turns,
+            },
         ))
     }
 }
@@ -94,6 +103,7 @@ impl Incremental for Transfer<SlamParticle, LaserReading> {
 mod tests {
     use super::*;
     use crate::slam::grid::TiledGrid;
+    use squall_core::motion::TurnErrorPrior;
 
     fn particle(x: f64, walls: i64) -> SlamParticle {
         let mut map = TiledGrid::new(0.05, (0.0, 0.0)).unwrap();
@@ -103,9 +113,14 @@ mod tests {
         let spread = MotionSpread {
             turn: [[0.01, 0.0, 0.001], [0.0, 0.02, 0.0], [0.001, 0.0, 0.003]],
             drive: [[0.02, 0.001, 0.0], [0.001, 0.03, 0.0], [0.0, 0.0, 0.004]],
+            turned: 0.7,
+            driven: 0.3,
         };
+        let mut turns = TurnErrorEstimate::default();
+        let prior = TurnErrorPrior { turn_error: 0.1, turn: 0.5, resolution: 0.05 };
+        turns.observe(0.6, 0.2, 0.04, &prior);
         let (pose, estimate) = (Pose2::new(x, 0.0, 0.1), Pose2::new(x, 0.01, 0.1));
-        SlamParticle { pose, estimate, map, history: MapHistory::default(), spread }
+        SlamParticle { pose, estimate, map, history: MapHistory::default(), spread, turns }
     }
 
     #[test]
@@ -120,6 +135,7 @@ mod tests {
         assert_eq!(back.states.iter().map(|s| s.0).collect::<Vec<_>>(), vec![0, 5]);
         assert_eq!((back.states[1].1.pose, back.states[1].1.estimate), (parent.pose, parent.estimate));
         assert_eq!(back.states[1].1.spread, parent.spread);
+        assert_eq!(back.states[1].1.turns, parent.turns);
         assert_eq!(back.states[1].1.map.get((7, 10)), parent.map.get((7, 10)));
         let plain = postcard::to_stdvec(&first).unwrap().len();
         // The second state refers to the first's tiles.
