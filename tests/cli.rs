@@ -519,6 +519,11 @@ fn slam_on_an_aces_prefix_writes_maps_and_a_good_trajectory() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let matcher = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "matcher").unwrap();
     assert!(matcher["custom"]["evaluations_per_particle"]["count"].as_u64().unwrap() > 0, "{matcher}");
+    // What the best particle learned of the robot's odometry: a turn error
+    // in thousandths, moved from the prior's 100 by the prefix's turns.
+    let turn_error = matcher["custom"]["turn_error_permille"].as_u64().unwrap();
+    assert!((10..500).contains(&turn_error) && turn_error != 100, "{matcher}");
+    assert!(matcher["custom"]["matcher_heading_noise_mrad"].as_u64().is_some(), "{matcher}");
     // Map memory and tiles cloned are reported per reading: one value per
     // update; the maps grow (a resampling may shrink them: copies share
     // tiles), the final size is among the sizes seen, and the clones add up
@@ -658,11 +663,13 @@ fn slam_on_the_simulator_is_the_same_for_every_matcher_count() {
 fn slam_on_an_aces_prefix_is_the_same_for_every_matcher_count() {
     let log = shared_data("laser/aces.clf");
     // Map snapshots every 3 readings, so that the old-map search runs (and
-    // particles move with their snapshots) within the prefix.
-    let args = ["--log", &log, "--max-scans", "500", "--set", "matcher.params.old_map_age=3"];
+    // particles move with their snapshots) within the prefix. (In 500 scans
+    // it ran but changed nothing once the turn error was learned without
+    // the matcher's noise.)
+    let args = ["--log", &log, "--max-scans", "700", "--set", "matcher.params.old_map_age=3"];
     let searched = assert_matchers_agree("slam-k-aces", &args);
     let dir = out_dir("slam-k-aces-no-old-map");
-    let out = squall(&["slam", "--log", &log, "--max-scans", "500", "--out", dir.to_str().unwrap()]);
+    let out = squall(&["slam", "--log", &log, "--max-scans", "700", "--out", dir.to_str().unwrap()]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let plain = std::fs::read(dir.join("trajectory.tum")).unwrap();
     assert!(plain != searched, "the old-map search changed nothing: it went untested");

@@ -95,6 +95,15 @@ pub trait ParticleModel: Send + Sync + 'static {
     /// Bytes that move when the state is sent to another task.
     fn state_bytes(&self, state: &Self::State) -> u64;
 
+    /// What a particle has learned of the robot, as named whole numbers,
+    /// reported as the matcher's counters at the end of a run for the best
+    /// particle (for SLAM: its odometry's turn error in thousandths). The
+    /// default learns nothing.
+    fn learned(&self, state: &Self::State) -> Vec<(&'static str, u64)> {
+        let _ = state;
+        Vec::new()
+    }
+
     /// Smoothing of the weights: log-weights are divided by this × N
     /// before exponentiating (GMapping's ogain). The default, 1 / N, takes
     /// the likelihoods as they are.

@@ -247,6 +247,22 @@ impl ParticleModel for SlamModel {
         p.memory() as u64
     }
 
+    /// With the Gaussian proposal and `learn_turn_error`: the turn error
+    /// the particle's lineage learned (`turn_error_permille`, thousandths
+    /// of a turn, one standard deviation) and the matcher's heading noise
+    /// it found in the corrections (`matcher_heading_noise_mrad`), a
+    /// calibration of the robot's odometry and of the scan matching.
+    fn learned(&self, p: &SlamParticle) -> Vec<(&'static str, u64)> {
+        if !self.options.learn_turn_error || self.options.proposal != Proposal::Gaussian {
+            return Vec::new();
+        }
+        let thousandths = |x: Real| (1000.0 * x).round() as u64;
+        vec![
+            ("turn_error_permille", thousandths(self.turn_error(p))),
+            ("matcher_heading_noise_mrad", thousandths(p.turns.matcher_noise().sqrt())),
+        ]
+    }
+
     fn weight_smoothing(&self) -> Real {
         self.options.ogain
     }
@@ -350,6 +366,22 @@ mod learning {
         assert!(exact < 0.05, "{exact}");
         // Before any correction, the setting.
         assert!((learned_turn_error(0.8, 0) - SlamOptions::default().turn_error).abs() < 1e-12);
+    }
+
+    #[test]
+    fn what_a_particle_learned_is_reported_in_thousandths() {
+        let model = SlamModel::new(SlamOptions::default()).unwrap();
+        let mut p = model.start(&scan_of(&room(), &Pose2::new(3.0, 2.0, 0.0)));
+        assert_eq!(model.learned(&p), vec![("turn_error_permille", 100), ("matcher_heading_noise_mrad", 0)]);
+        for r in [0.3, -0.3, 0.3, -0.3] {
+            p.turns.observe(0.5, 0.0, r * 0.5, &model.turn_prior());
+        }
+        let learned = model.learned(&p);
+        assert_eq!(learned[0], ("turn_error_permille", (1000.0 * model.turn_error(&p)).round() as u64));
+        assert!(learned[1].1 > 0, "alternating innovations are the matcher's: {learned:?}");
+        let climb =
+            SlamModel::new(SlamOptions { proposal: Proposal::Climb, ..SlamOptions::default() }).unwrap();
+        assert!(climb.learned(&p).is_empty());
     }
 
     #[test]

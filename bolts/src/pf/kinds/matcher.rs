@@ -15,7 +15,8 @@
 //! Metrics: `evaluations_per_particle`, `correct_us`, `update_us`,
 //! `particles_received`, `map_bytes_per_reading` (the task's particles'
 //! memory after each update, shared tiles counted once), and at the end
-//! `map_bytes` (the same, for the final set).
+//! `map_bytes` (the same, for the final set) and what the best particle
+//! learned of the robot (`ParticleModel::learned`).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -459,6 +460,13 @@ impl<M: HostedModel> Bolt for Matcher<M> {
         if let Some(shard) = &mut self.shard {
             // This task's particles' memory, shared map tiles counted once.
             out.count("map_bytes", self.model.memory(shard.held().iter().map(|(_, s)| s)));
+            // What the best particle learned of the robot: only its holder
+            // counts it, so the component's total is that particle's.
+            if let Some(best) = shard.state(self.best) {
+                for (name, value) in self.model.learned(best) {
+                    out.count(name, value);
+                }
+            }
             shard.keep_only(self.best);
         }
         self.emit_snapshot(out).await
