@@ -12,7 +12,7 @@ use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::random::standard_normal;
 
 mod turn_error;
-pub use turn_error::{PRIOR_TURNS, TurnErrorEstimate, TurnErrorPrior};
+pub use turn_error::{TurnErrorEstimate, TurnErrorPrior};
 
 /// The motion model's noise: how much translation and rotation error one
 /// metre of travel and one radian of turning add (GMapping's srr, srt, str,

@@ -17,7 +17,7 @@
 //! over the interval, `b d²` (its part is only estimated to be kept out of
 //! `a`: the spread keeps GMapping's `srt` for it). The two are fitted to
 //! the squared innovations by least squares, a variance-component
-//! regression, from running sums: a dozen numbers per lineage, copied
+//! regression, from running sums: ten numbers per lineage, copied
 //! with the particle, so that the estimate is a pure function of the
 //! lineage and any number of tasks reproduces one task's run.
 //!
@@ -29,10 +29,8 @@
 //! errors of two intervals are independent. The lag-one covariance
 //! measures σ² and the regression is fitted to what is left, so that the
 //! estimate is the odometry's error alone, which is what the proposal's
-//! motion model is for (the scan's information carries the matcher's).
-//! Measured on seed 1's runs before it was taken out: learned 0.097,
-//! 0.156, 0.24 against offline fits of 0.065, 0.144, 0.201 on ACES, Intel
-//! and MIT CSAIL, and 0.024 against 0.005 on a simulated robot.
+//! motion model is for (the scan's information carries the matcher's;
+//! what each version learned on the development logs: decision 0016).
 //!
 //! Until the lineage has turned enough, a prior holds the estimate: the
 //! configured `turn_error`, worth [`PRIOR_TURNS`] turns of the update
@@ -50,7 +48,7 @@ use crate::geometry::Real;
 /// minute's turning, after which a lineage's own corrections dominate.
 /// (After n turns the estimate's relative standard error is about
 /// √(2/n); ten turns make the prior's own worth ±45%.)
-pub const PRIOR_TURNS: Real = 10.0;
+const PRIOR_TURNS: Real = 10.0;
 
 /// Innovations beyond this many standard deviations of the estimate count
 /// at this many.
@@ -67,7 +65,7 @@ pub struct TurnErrorPrior {
     /// The turn error assumed before any correction, as a share of the turn.
     pub turn_error: Real,
     /// The angle of a typical turn between corrections (the filter's
-    /// update angle), radians: the prior counts [`PRIOR_TURNS`] of them.
+    /// update angle), radians: the prior counts ten of them.
     pub turn: Real,
     /// Heading innovations within this (radians) are never clipped: the
     /// scale below which a correction's heading is the matcher's own
