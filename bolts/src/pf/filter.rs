@@ -123,9 +123,9 @@ where
             self.last_corrected.replace(input.clone()).and_then(|from| self.model.measure_step(&from, input));
         self.measured.push((self.model.mark(input).0, measured));
         let model = &self.model;
-        let step = self.step;
+        let (step, sized) = (self.step, self.tasks > 1);
         let mut reports: Vec<_> =
-            self.shards.iter_mut().flat_map(|s| s.correct(model, step, input)).collect();
+            self.shards.iter_mut().flat_map(|s| s.correct(model, step, input, sized)).collect();
         reports.sort_by_key(|r| r.slot);
         let population = self.population.as_mut().expect("started");
         let poses: Vec<(Pose2, Real)> = reports.iter().map(|r| (r.pose, r.log_likelihood)).collect();
