@@ -307,6 +307,40 @@ fn eval_round_trips_a_tum_trajectory_and_reports_bad_files() {
     let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
     assert_eq!(v["pairs"], 1988);
     assert!(v["ate_rmse"].as_f64().unwrap() < 1e-6 && v["rpe_trans_rmse"].as_f64().unwrap() < 1e-6);
+    assert_eq!(v["frame"], "aligned", "a file that declares no frame is aligned");
+
+    // A localizer's trajectory declares the map frame and is scored as it
+    // is: moved 5 m, it is 5 m off everywhere, although it aligns to zero.
+    let mut shifted = squall::core::trajectory::Trajectory::default();
+    for (stamp, p) in t.stamps.iter().zip(&t.poses) {
+        shifted.push(*stamp, squall::core::geometry::Pose2::new(p.x + 3.0, p.y + 4.0, p.theta));
+    }
+    let in_map = dir.join("in_map.tum");
+    std::fs::write(&in_map, shifted.to_tum_in_frame("map")).unwrap();
+    let eval_in = |frame: &[&str]| {
+        let mut all = vec!["eval", "--trajectory", in_map.to_str().unwrap(), "--ground-truth"];
+        all.extend([tum.to_str().unwrap(), "--json"]);
+        all.extend_from_slice(frame);
+        let out = squall(&all);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        serde_json::from_str::<serde_json::Value>(&text(&out.stdout)).unwrap()
+    };
+    let v = eval_in(&[]);
+    assert_eq!((&v["frame"], &v["pairs"]), (&"map".into(), &1988.into()), "{v}");
+    assert!((v["map_mean_m"].as_f64().unwrap() - 5.0).abs() < 1e-5, "{v}");
+    assert!((v["map_max_m"].as_f64().unwrap() - 5.0).abs() < 1e-5, "{v}");
+    assert_eq!((v["map_within_share"].as_f64(), v["converged_after_s"].is_null()), (Some(0.0), true), "{v}");
+    let v = eval_in(&["--frame", "aligned"]);
+    assert!(v["ate_rmse"].as_f64().unwrap() < 1e-5 && v["map_mean_m"].is_null(), "{v}");
+    let text_out =
+        squall(&["eval", "--trajectory", in_map.to_str().unwrap(), "--ground-truth", tum.to_str().unwrap()]);
+    assert!(text(&text_out.stdout).contains("in the map frame, no alignment (the trajectory declares"));
+    // A frame eval does not know is an error before any scoring.
+    std::fs::write(&in_map, shifted.to_tum_in_frame("odom")).unwrap();
+    let out =
+        squall(&["eval", "--trajectory", in_map.to_str().unwrap(), "--ground-truth", tum.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("declares frame \"odom\""), "{}", text(&out.stderr));
 
     let bad = dir.join("bad.tum");
     std::fs::write(&bad, "1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n").unwrap();
@@ -787,9 +821,20 @@ fn localize_tracks_a_simulated_robot_in_a_real_building_map() {
     localize(&map, &one, &cache, &["--duration", "30", "--matchers", "1"]);
     localize(&map, &two, &cache, &["--duration", "30", "--matchers", "2"]);
     let tum = one.join("trajectory.tum");
+    // Scored in the map frame, as the trajectory declares: every pose
+    // within 5 cm, and the same figures in metrics.json.
     let v = against_ground_truth(&one);
-    let ate = v["ate_rmse"].as_f64().unwrap_or_else(|| panic!("no ATE in {v}"));
-    assert!(ate < 0.05, "ATE {ate} m");
+    assert_eq!(v["frame"], "map", "{v}");
+    let mean = v["map_mean_m"].as_f64().unwrap_or_else(|| panic!("no map-frame error in {v}"));
+    assert!(mean < 0.02 && v["map_max_m"].as_f64().unwrap() < 0.05, "{v}");
+    assert_eq!((v["map_within_share"].as_f64(), v["converged_after_s"].as_f64()), (Some(1.0), Some(0.0)));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(one.join("metrics.json")).unwrap()).unwrap();
+    for key in
+        ["pairs", "map_mean_m", "map_max_m", "map_rot_max_deg", "map_within_share", "converged_after_s"]
+    {
+        assert_eq!(m["localization"][key], v[key], "{key}: {}", m["localization"]);
+    }
     assert!(
         std::fs::read(&tum).unwrap() == std::fs::read(two.join("trajectory.tum")).unwrap(),
         "two matchers differ from one"
@@ -827,7 +872,8 @@ fn localize(map: &str, dir: &Path, cache: &Path, args: &[&str]) {
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
 
-/// `squall eval --json` of `dir`'s trajectory against its ground truth.
+/// `squall eval --json` of `dir`'s trajectory against its ground truth (in
+/// the frame the trajectory declares).
 fn against_ground_truth(dir: &Path) -> serde_json::Value {
     let (tum, truth) = (dir.join("trajectory.tum"), dir.join("ground_truth.tum"));
     let out = squall(&[
@@ -862,6 +908,12 @@ fn global_localization_converges_within_ten_seconds() {
     let (estimate, truth) = (tum_xy(&dir.join("trajectory.tum")), tum_xy(&dir.join("ground_truth.tum")));
     assert_eq!(estimate.len(), truth.len());
     let t0 = truth[0].0;
+    // metrics.json scores it in the map frame: settled within 0.2 m and 5°
+    // within ten seconds, and stayed.
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let converged = m["localization"]["converged_after_s"].as_f64();
+    assert!(converged.is_some_and(|s| s > 0.0 && s <= 10.0), "{}", m["localization"]);
     let first_error = (estimate[0].1 - truth[0].1).hypot(estimate[0].2 - truth[0].2);
     assert!(first_error > 1.0, "the uniform start is not already at the robot ({first_error:.2} m)");
     for (e, t) in estimate.iter().zip(&truth).filter(|(_, t)| t.0 - t0 >= 10.0) {
@@ -892,7 +944,7 @@ fn localize_with_a_simulated_depth_camera_tracks_through_fspf() {
     localize(&map, &dir, &cache, &["--input", "depth", "--duration", "5"]);
     let v = against_ground_truth(&dir);
     assert_eq!(v["pairs"].as_u64(), Some(50), "{v}");
-    assert!(v["ate_rmse"].as_f64().unwrap() < 0.05, "{v}");
+    assert!(v["map_mean_m"].as_f64().unwrap() < 0.05, "{v}");
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let points = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "points").unwrap();

@@ -3,6 +3,7 @@
 use squall_core::geometry::Pose2;
 use squall_core::occupancy::OccupancyGrid;
 use squall_core::sensor::PoseStamped;
+use squall_core::trajectory::declared_frame;
 use squall_topology::{
     BoxError, Declarer, Emitter, Params, Registry, RunOptions, Spout, SpoutStatus, Topology, TopologySpec,
 };
@@ -78,8 +79,29 @@ inputs = [ { from = "mapper", stream = "pose" } ]
     let poses = std::fs::read_to_string(dir.path().join("poses.tum")).unwrap();
     assert_eq!(poses.lines().filter(|l| !l.starts_with('#')).count(), 3);
 
-    // A bad parameter is reported by the factory.
-    let bad = toml.replace("params = { file = \"poses.tum\" }", "params = { file = \"a/b.tum\" }");
-    let e = Topology::validate(TopologySpec::parse("sinks.toml", &bad).unwrap(), &registry).unwrap_err();
-    assert!(e.to_string().contains("file must be a plain file name"), "{e}");
+    assert_eq!(declared_frame(&poses), None, "no frame unless one is given");
+
+    // With a frame, the file declares it and the poses are the same.
+    let framed = toml.replace("{ file = \"poses.tum\" }", "{ file = \"poses.tum\", frame = \"map\" }");
+    let topology =
+        Topology::validate(TopologySpec::parse("sinks.toml", &framed).unwrap(), &registry).unwrap();
+    squall_topology::run(&topology, &options).unwrap();
+    let in_map = std::fs::read_to_string(dir.path().join("poses.tum")).unwrap();
+    assert_eq!(declared_frame(&in_map), Some("map"));
+    assert_eq!(in_map.lines().filter(|l| !l.starts_with('#')).collect::<Vec<_>>(), poses_only(&poses));
+
+    // Bad parameters are reported by the factory.
+    for (param, message) in [
+        ("{ file = \"a/b.tum\" }", "file must be a plain file name"),
+        ("{ file = \"poses.tum\", frame = \"my map\" }", "frame must be one word"),
+    ] {
+        let bad = toml.replace("{ file = \"poses.tum\" }", param);
+        let e = Topology::validate(TopologySpec::parse("sinks.toml", &bad).unwrap(), &registry).unwrap_err();
+        assert!(e.to_string().contains(message), "{e}");
+    }
+}
+
+/// The pose lines of a TUM text.
+fn poses_only(text: &str) -> Vec<&str> {
+    text.lines().filter(|l| !l.starts_with('#')).collect()
 }

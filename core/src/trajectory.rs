@@ -62,6 +62,14 @@ impl Trajectory {
         s
     }
 
+    /// [`Self::to_tum`] with a first line declaring the poses' frame
+    /// (`# frame: map`), which `squall eval` scores them in. `frame` is one
+    /// word.
+    pub fn to_tum_in_frame(&self, frame: &str) -> String {
+        debug_assert!(!frame.is_empty() && !frame.contains(char::is_whitespace), "{frame:?}");
+        format!("{FRAME_COMMENT}{frame}\n{}", self.to_tum())
+    }
+
     /// Parses TUM text; `path` names it in errors. The heading is the yaw of
     /// the quaternion.
     pub fn parse_tum(path: &str, text: &str) -> Result<Self, TrajectoryError> {
@@ -88,6 +96,26 @@ impl Trajectory {
         let (name, text) = textfile::read(path)?;
         Self::parse_tum(&name, &text)
     }
+
+    /// Reads a TUM file, with the frame it declares (see
+    /// [`declared_frame`]).
+    pub fn read_tum_with_frame(path: &Path) -> Result<(Self, Option<String>), TrajectoryError> {
+        let (name, text) = textfile::read(path)?;
+        Ok((Self::parse_tum(&name, &text)?, declared_frame(&text).map(str::to_string)))
+    }
+}
+
+/// The comment line that declares a trajectory's frame, before the word.
+const FRAME_COMMENT: &str = "# frame: ";
+
+/// The frame a TUM text declares in a `# frame: <word>` line among its
+/// leading comments (as [`Trajectory::to_tum_in_frame`] writes), if any.
+pub fn declared_frame(text: &str) -> Option<&str> {
+    text.lines()
+        .take_while(|l| l.starts_with('#'))
+        .find_map(|l| l.strip_prefix(FRAME_COMMENT))
+        .map(str::trim)
+        .filter(|f| !f.is_empty())
 }
 
 #[cfg(test)]
@@ -104,6 +132,20 @@ mod tests {
         for (a, b) in back.poses.iter().zip(&t.poses) {
             assert!(a.distance(b) < 1e-6 && (a.theta - b.theta).abs() < 1e-8, "{a:?} {b:?}");
         }
+    }
+
+    #[test]
+    fn a_declared_frame_is_read_back_and_ignored_by_the_parser() {
+        let mut t = Trajectory::default();
+        t.push(1.5, Pose2::new(1.0, 2.0, 0.5));
+        let text = t.to_tum_in_frame("map");
+        assert_eq!(declared_frame(&text), Some("map"));
+        let back = Trajectory::parse_tum("t.tum", &text).unwrap();
+        assert_eq!(back.stamps, t.stamps);
+        assert_eq!(declared_frame(&t.to_tum()), None, "plain TUM declares nothing");
+        // Only the leading comments count: a line after the poses does not.
+        assert_eq!(declared_frame(&format!("{}# frame: map\n", t.to_tum())), None);
+        assert_eq!(declared_frame("# frame: \n1 0 0 0 0 0 0 1\n"), None);
     }
 
     #[test]

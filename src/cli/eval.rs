@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use squall_core::eval::ground_truth::{self, GroundTruthScore};
+use squall_core::eval::map_frame::{self, MapFrameScore, WITHIN_DEG, WITHIN_M};
 use squall_core::eval::relations::{self, RelationScore, read_relations};
 use squall_core::trajectory::Trajectory;
 use squall_spouts::carmen::{Laser, ReadOptions, Record, read_log};
@@ -19,24 +20,55 @@ pub(super) struct EvalArgs {
     /// Ground-truth relations (Kümmerle et al. 2009 format).
     #[arg(long, value_name = "FILE")]
     relations: Option<PathBuf>,
-    /// A ground-truth trajectory (TUM) for ATE and RPE.
+    /// A ground-truth trajectory (TUM): ATE and RPE, or in the map frame
+    /// the errors as they are.
     #[arg(long, value_name = "FILE")]
     ground_truth: Option<PathBuf>,
+    /// How poses are compared with the ground truth: `aligned` (ATE after
+    /// the best rigid alignment: a SLAM map's frame is its own) or `map`
+    /// (as they are: a localizer's poses are in the given map's frame).
+    /// The default is the frame the trajectory file declares (`# frame:
+    /// map`, as `squall localize` writes), else `aligned`.
+    #[arg(long, value_name = "aligned|map")]
+    frame: Option<Frame>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
 }
 
+/// How a trajectory is compared with its ground truth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum Frame {
+    /// After the best rigid alignment.
+    Aligned,
+    /// As the poses are, in the map frame.
+    Map,
+}
+
+/// The scores against ground truth, in the frame chosen.
+enum TruthScore {
+    Aligned(GroundTruthScore),
+    Map(MapFrameScore),
+}
+
 /// Runs `squall eval`.
 pub(super) fn eval(args: &EvalArgs) -> ExitCode {
     match scores(args) {
-        Ok((trajectory, rel, gt)) => {
+        Ok(Scores { trajectory, frame, relations: rel, truth }) => {
             if args.json {
                 let mut obj = serde_json::Map::new();
-                for value in [serde_json::to_value(rel), serde_json::to_value(gt)].into_iter().flatten() {
+                let truth = match truth {
+                    Some(TruthScore::Aligned(g)) => serde_json::to_value(g),
+                    Some(TruthScore::Map(m)) => serde_json::to_value(m),
+                    None => Ok(serde_json::Value::Null),
+                };
+                for value in [serde_json::to_value(rel), truth].into_iter().flatten() {
                     if let serde_json::Value::Object(m) = value {
                         obj.extend(m);
                     }
+                }
+                if args.ground_truth.is_some() {
+                    obj.insert("frame".into(), frame.name().into());
                 }
                 println!("{}", serde_json::Value::Object(obj));
             } else {
@@ -58,16 +90,20 @@ pub(super) fn eval(args: &EvalArgs) -> ExitCode {
                         );
                     }
                 }
-                if let Some(g) = gt {
-                    println!("ground truth: {} poses matched", g.pairs);
-                    println!(
-                        "  ATE: {:.4} m RMSE, {:.3} deg mean heading error",
-                        g.ate_rmse, g.ate_rot_mean_deg
-                    );
-                    println!(
-                        "  RPE: {:.4} m, {:.3} deg RMSE (consecutive poses)",
-                        g.rpe_trans_rmse, g.rpe_rot_rmse_deg
-                    );
+                match truth {
+                    Some(TruthScore::Aligned(g)) => {
+                        println!("ground truth: {} poses matched, compared after alignment", g.pairs);
+                        println!(
+                            "  ATE: {:.4} m RMSE, {:.3} deg mean heading error",
+                            g.ate_rmse, g.ate_rot_mean_deg
+                        );
+                        println!(
+                            "  RPE: {:.4} m, {:.3} deg RMSE (consecutive poses)",
+                            g.rpe_trans_rmse, g.rpe_rot_rmse_deg
+                        );
+                    }
+                    Some(TruthScore::Map(m)) => print_map_frame(&m, args.frame.is_none()),
+                    None => {}
                 }
             }
             ExitCode::SUCCESS
@@ -79,16 +115,56 @@ pub(super) fn eval(args: &EvalArgs) -> ExitCode {
     }
 }
 
-type Scores = (Trajectory, Option<RelationScore>, Option<GroundTruthScore>);
+/// What `squall eval` found: the trajectory, the frame it was compared
+/// in, and its scores.
+struct Scores {
+    trajectory: Trajectory,
+    frame: Frame,
+    relations: Option<RelationScore>,
+    truth: Option<TruthScore>,
+}
+
+impl Frame {
+    fn name(self) -> &'static str {
+        match self {
+            Frame::Aligned => "aligned",
+            Frame::Map => "map",
+        }
+    }
+}
+
+/// Prints a map-frame score; `declared`: the frame came from the file.
+pub(super) fn print_map_frame(m: &MapFrameScore, declared: bool) {
+    let why = if declared { " (the trajectory declares its frame)" } else { "" };
+    println!("ground truth: {} poses matched, compared in the map frame, no alignment{why}", m.pairs);
+    println!("  position error: {:.4} m mean, {:.4} m max", m.map_mean_m, m.map_max_m);
+    println!("  heading error:  {:.3} deg mean, {:.3} deg max", m.map_rot_mean_deg, m.map_rot_max_deg);
+    println!("  within {WITHIN_M} m and {WITHIN_DEG} deg: {:.1}% of the poses", 100.0 * m.map_within_share);
+    match m.converged_after_s {
+        Some(t) => println!("  converged after {t:.2} s and stayed"),
+        None => println!("  not converged: the last pose is off"),
+    }
+}
 
 fn scores(args: &EvalArgs) -> Result<Scores, String> {
     if args.relations.is_none() && args.ground_truth.is_none() {
         return Err("give --relations FILE and/or --ground-truth FILE to score against".to_string());
     }
-    let trajectory = load_trajectory(&args.trajectory)?;
+    let (trajectory, declared) = load_trajectory(&args.trajectory)?;
     if trajectory.is_empty() {
         return Err(format!("{}: the trajectory has no poses", args.trajectory.display()));
     }
+    let frame = match (args.frame, declared.as_deref()) {
+        (Some(frame), _) => frame,
+        (None, Some("map")) => Frame::Map,
+        (None, Some(other)) => {
+            return Err(format!(
+                "{}: declares frame \"{other}\", which eval does not know; give --frame aligned or --frame map",
+                args.trajectory.display()
+            ));
+        }
+        (None, None) => Frame::Aligned,
+    };
     let rel = match &args.relations {
         Some(path) => {
             let relations = read_relations(path).map_err(|e| e.to_string())?;
@@ -104,25 +180,33 @@ fn scores(args: &EvalArgs) -> Result<Scores, String> {
         }
         None => None,
     };
-    let gt = match &args.ground_truth {
+    let truth = match &args.ground_truth {
         Some(path) => {
             let truth = Trajectory::read_tum(path).map_err(|e| e.to_string())?;
-            let score = ground_truth::score(&trajectory, &truth);
-            if score.pairs == 0 {
-                return Err(format!("no pose of {} shares a stamp with the trajectory", path.display()));
-            }
-            Some(score)
+            let no_pair = || format!("no pose of {} shares a stamp with the trajectory", path.display());
+            Some(match frame {
+                Frame::Aligned => {
+                    let score = ground_truth::score(&trajectory, &truth);
+                    if score.pairs == 0 {
+                        return Err(no_pair());
+                    }
+                    TruthScore::Aligned(score)
+                }
+                Frame::Map => TruthScore::Map(map_frame::score(&trajectory, &truth).ok_or_else(no_pair)?),
+            })
         }
         None => None,
     };
-    Ok((trajectory, rel, gt))
+    Ok(Scores { trajectory, frame, relations: rel, truth })
 }
 
-fn load_trajectory(path: &Path) -> Result<Trajectory, String> {
+/// The trajectory and the frame its file declares (a CARMEN log's
+/// odometry declares none).
+fn load_trajectory(path: &Path) -> Result<(Trajectory, Option<String>), String> {
     if is_carmen(path) {
-        odometry_at_scans(path)
+        Ok((odometry_at_scans(path)?, None))
     } else {
-        Trajectory::read_tum(path).map_err(|e| e.to_string())
+        Trajectory::read_tum_with_frame(path).map_err(|e| e.to_string())
     }
 }
 

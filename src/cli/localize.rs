@@ -1,12 +1,16 @@
 //! `squall localize`: runs `examples/topologies/localize.toml` (embedded):
 //! CGR localization on a line map, here on the simulator's laser.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+
+use squall_core::eval::map_frame;
+use squall_core::trajectory::Trajectory;
 
 use squall_spouts::sim::{SimConfig, SimEvent, Simulation, floor_for};
 use squall_topology::{Override, TopologySpec};
 
+use super::eval::print_map_frame;
 use super::{EXIT_INVALID, report_invalid, run};
 
 const LOCALIZE_TOML: &str = include_str!("../../examples/topologies/localize.toml");
@@ -144,7 +148,19 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
     };
     let spec = TopologySpec::parse_with("localize.toml (built in)", LOCALIZE_TOML, &overrides);
     match report_invalid(spec) {
-        Ok(topology) => run::run(&topology, Some(args.out.clone()), false, None),
+        Ok(topology) => run::run_scored(&topology, Some(args.out.clone()), false, None, Some(&score)),
         Err(code) => code,
     }
+}
+
+/// The run's trajectory against the simulator's ground truth, in the map
+/// frame (a localizer's poses are in the map's frame: no alignment),
+/// printed and returned for metrics.json under `localization`.
+fn score(dir: &Path) -> Result<(&'static str, serde_json::Value), String> {
+    let read = |name: &str| Trajectory::read_tum(&dir.join(name)).map_err(|e| e.to_string());
+    let (estimate, truth) = (read("trajectory.tum")?, read("ground_truth.tum")?);
+    let score = map_frame::score(&estimate, &truth)
+        .ok_or("no pose of trajectory.tum shares a stamp with ground_truth.tum")?;
+    print_map_frame(&score, false);
+    Ok(("localization", serde_json::to_value(score).map_err(|e| e.to_string())?))
 }

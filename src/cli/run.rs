@@ -10,6 +10,10 @@ use squall_topology::{Progress, RunError, RunOptions, RunReport, Topology};
 
 use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay};
 
+/// Scores a finished run from the files it wrote in the output folder:
+/// (key, value) for metrics.json, or what went wrong.
+pub(super) type Scorer<'a> = &'a dyn Fn(&Path) -> Result<(&'static str, serde_json::Value), String>;
+
 /// Runs the topology (in this process, or on the workers of a cluster
 /// file), prints the summary, writes metrics.json.
 pub(super) fn run(
@@ -17,6 +21,18 @@ pub(super) fn run(
     out: Option<PathBuf>,
     quiet: bool,
     cluster: Option<&Path>,
+) -> ExitCode {
+    run_scored(topology, out, quiet, cluster, None)
+}
+
+/// [`run`], and when the run succeeded, `scorer`'s score of its outputs
+/// in metrics.json too.
+pub(super) fn run_scored(
+    topology: &Topology,
+    out: Option<PathBuf>,
+    quiet: bool,
+    cluster: Option<&Path>,
+    scorer: Option<Scorer>,
 ) -> ExitCode {
     let progress = Arc::new(Progress::default());
     let options =
@@ -54,8 +70,19 @@ pub(super) fn run(
         print!("{report}");
     }
     let mut code = ExitCode::SUCCESS;
+    let score = match (&out, scorer, &failure) {
+        (Some(dir), Some(scorer), None) => match scorer(dir) {
+            Ok(score) => Some(score),
+            Err(message) => {
+                eprintln!("error: cannot score the run: {message}");
+                code = ExitCode::from(EXIT_FAILED);
+                None
+            }
+        },
+        _ => None,
+    };
     if let Some(dir) = &out {
-        if let Err(e) = write_metrics(dir, &report) {
+        if let Err(e) = write_metrics(dir, &report, score) {
             eprintln!("error: cannot write {}: {e}", dir.join("metrics.json").display());
             code = ExitCode::from(EXIT_FAILED);
         }
@@ -102,8 +129,23 @@ fn on_cluster(
     ))
 }
 
-fn write_metrics(dir: &std::path::Path, report: &RunReport) -> std::io::Result<()> {
-    write_atomic(&dir.join("metrics.json"), report.to_json().as_bytes())
+/// Writes metrics.json: the run's report, with `score` added under its key.
+fn write_metrics(
+    dir: &std::path::Path,
+    report: &RunReport,
+    score: Option<(&'static str, serde_json::Value)>,
+) -> std::io::Result<()> {
+    let json = match score {
+        None => report.to_json(),
+        Some((key, value)) => {
+            let mut all = serde_json::to_value(report).map_err(std::io::Error::other)?;
+            if let Some(fields) = all.as_object_mut() {
+                fields.insert(key.to_string(), value);
+            }
+            serde_json::to_string_pretty(&all).map_err(std::io::Error::other)?
+        }
+    };
+    write_atomic(&dir.join("metrics.json"), json.as_bytes())
 }
 
 /// First Ctrl-C: stop the spouts and let the run drain and finish. Second:

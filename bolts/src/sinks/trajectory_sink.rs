@@ -1,6 +1,9 @@
 //! `sink.trajectory`: collects poses and writes `DIR/<file>` (TUM) at the
 //! end. It takes `PoseStamped` estimates, and `LaserReading`s (their
-//! odometry poses: the raw-odometry trajectory of a log).
+//! odometry poses: the raw-odometry trajectory of a log). With `frame`, the
+//! file's first line declares the poses' frame (`# frame: map` for a
+//! localizer's, whose poses are in the given map's frame), and `squall
+//! eval` scores them in it.
 
 use std::path::PathBuf;
 
@@ -9,6 +12,7 @@ use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tas
 
 use squall_core::sensor::{LaserReading, PoseStamped};
 use squall_core::trajectory::Trajectory;
+use squall_topology::fsio::write_atomic;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -17,6 +21,9 @@ struct P {
     /// `trajectory.tum`.
     #[serde(default = "default_file")]
     file: String,
+    /// The frame the poses are in, declared in the file (one word).
+    #[serde(default)]
+    frame: Option<String>,
 }
 
 fn default_file() -> String {
@@ -27,6 +34,7 @@ fn default_file() -> String {
 #[derive(Debug)]
 pub struct TrajectorySink {
     file: String,
+    frame: Option<String>,
     out: Option<PathBuf>,
     trajectory: Trajectory,
 }
@@ -34,14 +42,17 @@ pub struct TrajectorySink {
 impl TrajectorySink {
     /// Builds the sink from its `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
-        let P { file } = p.parse()?;
+        let P { file, frame } = p.parse()?;
         if file.is_empty() || file.contains('/') {
             return Err(ParamError::new(format!("file must be a plain file name, got \"{file}\"")));
+        }
+        if let Some(f) = frame.as_deref().filter(|f| f.is_empty() || f.contains(char::is_whitespace)) {
+            return Err(ParamError::new(format!("frame must be one word, such as \"map\", got \"{f}\"")));
         }
         if p.parallelism() != 1 {
             return Err(ParamError::new("sink.trajectory writes one file: use parallelism 1"));
         }
-        Ok(TrajectorySink { file, out: None, trajectory: Trajectory::default() })
+        Ok(TrajectorySink { file, frame, out: None, trajectory: Trajectory::default() })
     }
 }
 
@@ -75,7 +86,11 @@ impl Bolt for TrajectorySink {
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         out.count("poses", self.trajectory.len() as u64);
         if let Some(path) = &self.out {
-            super::write_tum(&self.trajectory, path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let text = match &self.frame {
+                Some(frame) => self.trajectory.to_tum_in_frame(frame),
+                None => self.trajectory.to_tum(),
+            };
+            write_atomic(path, text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))?;
         }
         Ok(())
     }

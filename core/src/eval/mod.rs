@@ -5,10 +5,13 @@
 //!   relation between two scans, the error of the estimated relative motion.
 //! - [`ground_truth`]: absolute trajectory error after an SE(2) alignment,
 //!   and relative pose error between consecutive poses.
+//! - [`map_frame`]: errors in the map's frame, with no alignment, and the
+//!   time to convergence: how a localizer is scored.
 //!
-//! Both score a [`Trajectory`](crate::trajectory::Trajectory).
+//! Each scores a [`Trajectory`](crate::trajectory::Trajectory).
 
 pub mod ground_truth;
+pub mod map_frame;
 pub mod relations;
 
 /// Mean and population standard deviation.
