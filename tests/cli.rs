@@ -938,6 +938,32 @@ fn global_localization_converges_within_ten_seconds() {
 }
 
 #[test]
+fn global_localization_never_reports_a_pose_outside_the_building() {
+    use squall::core::interior::{DEFAULT_OPENING, Interior};
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let walls = squall::core::linemap::LineMap::load(Path::new(&map)).unwrap();
+    let inside = Interior::of(&walls, DEFAULT_OPENING).unwrap();
+    let (dir, cache) = (out_dir("localize-inside"), out_dir("localize-inside-scenes"));
+    // Seeds 3 and 6 do not converge from a uniform start, and their sets
+    // used to leave the building through its outer wall, ending tens of
+    // metres outside; kept inside, no estimate of theirs is outside.
+    let outside = |seed: &str, keep: &str| {
+        let keep = format!("matcher.params.keep_inside={keep}");
+        let args =
+            ["--duration", "15", "--init", "global", "--particles", "500", "--seed", seed, "--set", &keep];
+        localize(&map, &dir, &cache, &args);
+        let estimates = tum_xy(&dir.join("trajectory.tum"));
+        estimates.iter().filter(|p| !inside.contains(p.1, p.2)).count()
+    };
+    for seed in ["3", "6"] {
+        assert_eq!(outside(seed, "true"), 0, "seed {seed}");
+    }
+    assert!(outside("6", "false") > 50, "without the inside, seed 6 leaves the building");
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&cache);
+}
+
+#[test]
 fn localize_with_a_simulated_depth_camera_tracks_through_fspf() {
     let map = shared_data("linemaps/CVAP7_vector.txt");
     let (dir, cache) = (out_dir("localize-depth"), out_dir("localize-depth-scenes"));

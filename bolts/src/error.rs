@@ -54,6 +54,9 @@ pub enum Error {
     /// A line-map file that does not read or parse.
     #[error(transparent)]
     MapFile(#[from] squall_core::textfile::TextFileError),
+    /// A map's inside could not be found (see `squall_core::interior`).
+    #[error(transparent)]
+    Core(#[from] squall_core::Error),
     /// The scene cache could not be read or written.
     #[error(transparent)]
     SceneCache(#[from] SceneCacheError),

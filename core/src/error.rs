@@ -69,6 +69,10 @@ pub enum Error {
         /// Cells it holds.
         cells: usize,
     },
+    /// A building's inside cannot be found from its line map (see
+    /// [`crate::interior`]).
+    #[error("a building's inside: {0}")]
+    Interior(String),
     /// A map could not be encoded as PNG.
     #[error(transparent)]
     PngEncode(#[from] png::EncodingError),

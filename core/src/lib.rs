@@ -1,7 +1,7 @@
 //! squall-core: the robotics vocabulary every part of squall shares.
 //!
 //! Geometry and poses, sensor readings (laser, odometry, depth frames and
-//! the camera model), occupancy grids and line maps, what is visible from a
+//! the camera model), occupancy grids and line maps, a building's inside, what is visible from a
 //! point of a line map, trajectories and how the SLAM field scores them, the
 //! odometry motion model, seeded random streams, text parsing helpers, the
 //! map writers and the depth renderer. Pure values and functions: nothing
@@ -14,6 +14,7 @@ pub mod depth_render;
 mod error;
 pub mod eval;
 pub mod geometry;
+pub mod interior;
 pub mod linemap;
 pub mod map_files;
 pub mod motion;

@@ -79,6 +79,10 @@ struct CgrParams {
     srt: Real,
     str: Real,
     stt: Real,
+    /// Keep the particles inside the building (true by default), closing
+    /// gaps in its outline narrower than `inside_opening` metres.
+    keep_inside: bool,
+    inside_opening: Real,
 }
 
 /// Augmented MCL's rates when `injection = true` and none are given.
@@ -113,6 +117,8 @@ impl Default for CgrParams {
             srt: m.srt,
             str: m.str,
             stt: m.stt,
+            keep_inside: o.inside_opening.is_some(),
+            inside_opening: o.inside_opening.unwrap_or(squall_core::interior::DEFAULT_OPENING),
         }
     }
 }
@@ -190,6 +196,7 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
             alpha_fast: p.alpha_fast,
             min_drop: p.min_drop,
         }),
+        inside_opening: p.keep_inside.then_some(p.inside_opening),
     };
     CgrModel::new(map, scenes, options)
 }

@@ -2,7 +2,10 @@
 //! model predicts, Corrective Gradient Refinement moves each particle up
 //! the measurement likelihood, the likelihood at the refined pose weighs
 //! it. The observable scene comes from a precomputed grid when there is
-//! one, else it is ray cast on demand.
+//! one, else it is ray cast on demand. Where the robot cannot be (outside
+//! the building, within a thick wall: [`Interior`]) no pose is proposed; a
+//! particle that moves there is drawn again where the reading supports,
+//! and one that stays there weighs nothing beside those inside.
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -18,6 +21,7 @@ use crate::pf::model::{Correction, Injection, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::slam::model::OdometryStep;
 use squall_core::geometry::{Pose2, Real};
+use squall_core::interior::{DEFAULT_OPENING, Interior};
 use squall_core::linemap::LineMap;
 use squall_core::motion::{MotionNoise, sample_motion};
 use squall_core::visibility::observable_scene;
@@ -53,6 +57,10 @@ pub struct LocalizeOptions {
     /// MCL, meant for recovery from kidnapping); `None`, the default, turns
     /// it off. Not yet shown to recover a kidnapped robot here.
     pub injection: Option<Injection>,
+    /// Keep the particles inside the building, closing gaps in its outline
+    /// narrower than this many metres (see [`Interior`]); `None` lets them
+    /// anywhere.
+    pub inside_opening: Option<Real>,
 }
 
 impl Default for LocalizeOptions {
@@ -65,6 +73,7 @@ impl Default for LocalizeOptions {
             resampling: Scheme::LowVariance,
             resample_threshold: 0.5,
             injection: None,
+            inside_opening: Some(DEFAULT_OPENING),
         }
     }
 }
@@ -78,7 +87,16 @@ pub struct CgrModel {
     /// Running total of wall lengths, wall by wall (for drawing a wall
     /// in proportion to its length).
     wall_lengths: Vec<Real>,
+    /// Where the robot can be; `None` where not asked for, or where the
+    /// map encloses nothing (an open site).
+    interior: Option<Arc<Interior>>,
 }
+
+/// What a pose where the robot cannot be adds to its log-likelihood: the
+/// map's prior there is zero, and e^(−10⁴) is zero beside any fit; finite,
+/// so that a set wholly outside (a map whose inside is drawn wrong) keeps
+/// the weights its fits give.
+const OUTSIDE_LOG_PRIOR: Real = -1e4;
 
 /// Draws an injected pose tries before it falls back to a uniform one.
 const PROPOSAL_TRIES: usize = 20;
@@ -118,17 +136,37 @@ impl CgrModel {
                 Some(*total)
             })
             .collect();
-        Ok(CgrModel { map, scenes, options, wall_lengths })
+        let interior = match options.inside_opening {
+            Some(opening) => {
+                let interior = Interior::of(&map, opening)?;
+                if interior.is_empty() {
+                    tracing::warn!(
+                        "the map encloses no region (gaps in its outline wider than {opening} m): \
+                         particles are not kept inside"
+                    );
+                }
+                (!interior.is_empty()).then(|| Arc::new(interior))
+            }
+            None => None,
+        };
+        Ok(CgrModel { map, scenes, options, wall_lengths, interior })
     }
 
-    /// A pose drawn uniformly over the map's bounding box.
+    /// Whether the robot can be at `pose`'s position (anywhere, without an
+    /// inside).
+    pub fn can_be_at(&self, pose: &Pose2) -> bool {
+        self.interior.as_ref().is_none_or(|i| i.contains(pose.x, pose.y))
+    }
+
+    /// A pose drawn uniformly over the inside, or over the map's bounding
+    /// box without one.
     fn uniform(&self, rng: &mut ChaCha8Rng) -> Pose2 {
+        let theta = (rng.random::<Real>() * 2.0 - 1.0) * std::f64::consts::PI;
+        if let Some((x, y)) = self.interior.as_ref().and_then(|i| i.sample(rng)) {
+            return Pose2::new(x, y, theta);
+        }
         let (x0, y0, x1, y1) = self.map.bounds();
-        Pose2::new(
-            x0 + rng.random::<Real>() * (x1 - x0),
-            y0 + rng.random::<Real>() * (y1 - y0),
-            (rng.random::<Real>() * 2.0 - 1.0) * std::f64::consts::PI,
-        )
+        Pose2::new(x0 + rng.random::<Real>() * (x1 - x0), y0 + rng.random::<Real>() * (y1 - y0), theta)
     }
 
     /// A pose at which one observed point, drawn at random, lies on a wall
@@ -168,7 +206,8 @@ impl CgrModel {
         let (dx, dy) = (q.0 - sensor.0, q.1 - sensor.1);
         let d = dx.hypot(dy);
         let short = if d > 0.01 { (q.0 - 0.01 * dx / d, q.1 - 0.01 * dy / d) } else { sensor };
-        self.map.clear(sensor, short).then_some(Pose2::new(robot.0, robot.1, theta))
+        let pose = Pose2::new(robot.0, robot.1, theta);
+        (self.can_be_at(&pose) && self.map.clear(sensor, short)).then_some(pose)
     }
 
     /// The walls visible from `pose`: the grid's cell if the pose is on the
@@ -241,13 +280,23 @@ impl ParticleModel for CgrModel {
         pose: &mut Pose2,
         input: &Observation2d,
         (): &mut (),
-        _: &mut ChaCha8Rng,
+        rng: &mut ChaCha8Rng,
     ) -> Correction {
+        // A particle where the robot cannot be carries no hypothesis: it is
+        // drawn again where the reading supports (sensor resetting, Lenser
+        // and Veloso 2000), so a set that drifts out of the building
+        // through a wall comes back to places the scan fits.
+        if !self.can_be_at(pose)
+            && let Some(drawn) = (0..PROPOSAL_TRIES).find_map(|_| self.propose(input, rng))
+        {
+            *pose = drawn;
+        }
         let (refined, e, evaluations) =
             refine(&self.map, &mut |p: &Pose2| self.lines_at(p), pose, input, &self.options.cgr);
         *pose = refined;
         let points = input.points.len().max(1) as Real;
-        Correction { log_likelihood: e.log_likelihood, evaluations, fit: e.log_likelihood / points }
+        let prior = if self.can_be_at(pose) { 0.0 } else { OUTSIDE_LOG_PRIOR };
+        Correction { log_likelihood: e.log_likelihood + prior, evaluations, fit: e.log_likelihood / points }
     }
 
     fn pose(&self, pose: &Pose2) -> Pose2 {
@@ -264,5 +313,95 @@ impl ParticleModel for CgrModel {
 
     fn resampling(&self) -> Scheme {
         self.options.resampling
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use squall_core::linemap::Segment;
+
+    /// A 10 × 6 m room with a 1 m door in its south wall.
+    fn room() -> Arc<LineMap> {
+        let s = |a: (Real, Real), b: (Real, Real)| Segment { a, b };
+        Arc::new(LineMap {
+            walls: vec![
+                s((0.0, 0.0), (4.0, 0.0)),
+                s((5.0, 0.0), (10.0, 0.0)),
+                s((10.0, 0.0), (10.0, 6.0)),
+                s((10.0, 6.0), (0.0, 6.0)),
+                s((0.0, 6.0), (0.0, 0.0)),
+            ],
+        })
+    }
+
+    /// The robot at (5, 3) facing east sees the east wall (x = 10) from
+    /// y = 1 to 5, its normal facing back.
+    fn east_wall_seen() -> Observation2d {
+        let points: Vec<[f32; 2]> = (0..41).map(|k| [5.0, -2.0 + 0.1 * k as f32]).collect();
+        let normals = vec![[-1.0, 0.0]; points.len()];
+        Observation2d { points, normals, ..Observation2d::default() }
+    }
+
+    fn model(keep_inside: bool) -> CgrModel {
+        let inside_opening = keep_inside.then_some(DEFAULT_OPENING);
+        CgrModel::new(room(), None, LocalizeOptions { inside_opening, ..LocalizeOptions::default() }).unwrap()
+    }
+
+    #[test]
+    fn no_pose_is_proposed_outside_the_building() {
+        let obs = east_wall_seen();
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let draws = |m: &CgrModel, rng: &mut ChaCha8Rng| -> Vec<Pose2> {
+            (0..2000).filter_map(|_| m.propose(&obs, rng)).collect()
+        };
+        // The room, and the inside's tolerance beyond its walls (a doorway).
+        let room_box = |p: &Pose2| (-0.3..=10.3).contains(&p.x) && (-0.3..=6.3).contains(&p.y);
+        let kept = draws(&model(true), &mut rng);
+        let bad: Vec<&Pose2> = kept.iter().filter(|p| !room_box(p)).collect();
+        assert!(kept.len() > 200 && bad.is_empty(), "{} drawn, {bad:?}", kept.len());
+        // Without the inside, the outer walls seen from outside are
+        // proposals too.
+        let free = draws(&model(false), &mut rng);
+        assert!(free.iter().filter(|p| !room_box(p)).count() > 100, "{} drawn", free.len());
+        // Global starts land inside as well.
+        let m = model(true);
+        for _ in 0..200 {
+            let mut p = Pose2::new(50.0, 50.0, 0.0);
+            m.scatter(&mut p, &obs, &mut rng);
+            assert!(room_box(&p), "{p:?}");
+        }
+    }
+
+    #[test]
+    fn a_particle_outside_is_drawn_again_where_the_reading_fits() {
+        let obs = east_wall_seen();
+        let m = model(true);
+        let inside = Pose2::new(5.0, 3.0, 0.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let at_truth = m.correct(&mut inside.clone(), &obs, &mut (), &mut rng).log_likelihood;
+        let mut outside = Pose2::new(15.0, 3.0, 0.0);
+        let c = m.correct(&mut outside, &obs, &mut (), &mut rng);
+        assert!(m.can_be_at(&outside), "drawn again: {outside:?}");
+        assert!(c.log_likelihood > OUTSIDE_LOG_PRIOR / 2.0, "weighed by its fit alone: {c:?}");
+        // With nothing to draw from, it stays, and weighs nothing beside a
+        // particle inside.
+        let mut stuck = Pose2::new(15.0, 3.0, 0.0);
+        let blind = Observation2d::default();
+        let c = m.correct(&mut stuck, &blind, &mut (), &mut rng);
+        assert!(!m.can_be_at(&stuck) && c.log_likelihood < at_truth + OUTSIDE_LOG_PRIOR / 2.0, "{c:?}");
+        // Without the inside, nothing changes for it.
+        let mut free = Pose2::new(15.0, 3.0, 0.0);
+        let c = model(false).correct(&mut free, &blind, &mut (), &mut rng);
+        assert!(free.x > 12.0 && c.log_likelihood > OUTSIDE_LOG_PRIOR / 2.0, "{free:?} {c:?}");
+    }
+
+    #[test]
+    fn a_map_that_encloses_nothing_keeps_no_one_out() {
+        // The room without its east and west walls: open on two sides.
+        let open = Arc::new(LineMap { walls: room().walls[..2].to_vec() });
+        let m = CgrModel::new(open, None, LocalizeOptions::default()).unwrap();
+        assert!(m.can_be_at(&Pose2::new(50.0, -50.0, 0.0)));
     }
 }
