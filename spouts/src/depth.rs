@@ -15,7 +15,7 @@ use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, Sp
 
 use crate::sim::office::Floor;
 use crate::sim::people::Crowd;
-use crate::sim::{DEFAULT_WORLD, SimConfig, SimEvent, Simulation, floor_for};
+use crate::sim::{DEFAULT_WORLD, SimConfig, SimEvent, Simulation, Start, floor_for};
 use crate::{Error, Result};
 
 /// The `depth_sim` spout's params; a param left out takes its value from
@@ -36,6 +36,9 @@ struct P {
     people: usize,
     /// Seed; the default (`None`) is the topology's.
     seed: Option<u64>,
+    /// Where the robot starts: `"first_node"` (the default) or `"drawn"`
+    /// per seed ([`Start`]).
+    start: Start,
 }
 
 impl Default for P {
@@ -47,6 +50,7 @@ impl Default for P {
             boxes: 20,
             people: 5,
             seed: None,
+            start: Start::default(),
         }
     }
 }
@@ -128,6 +132,7 @@ impl Spout for DepthSimSpout {
             scan_hz: self.p.frame_hz,
             range_max: 8.0,
             beams: 2,
+            start: self.p.start,
             ..SimConfig::default()
         };
         config.check()?;

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use squall_core::eval::map_frame;
 use squall_core::trajectory::Trajectory;
 
-use squall_spouts::sim::{SimConfig, SimEvent, Simulation, floor_for};
+use squall_spouts::sim::{SimConfig, SimEvent, Simulation, Start, floor_for};
 use squall_topology::{Override, TopologySpec};
 
 use super::eval::print_map_frame;
@@ -44,7 +44,13 @@ pub(super) struct LocalizeArgs {
     /// reading supports, anywhere on the map).
     #[arg(long, value_name = "known|global", default_value = "known")]
     init: String,
-    /// Run seed (simulated world, route and noise, and the filter).
+    /// Where the simulated robot starts: `drawn` per seed anywhere on the
+    /// map's roadmap, or `first-node` (the roadmap's first node, every
+    /// seed's start).
+    #[arg(long, value_name = "drawn|first-node", default_value = "drawn")]
+    start: String,
+    /// Run seed (the simulated robot's start, route and noise, and the
+    /// filter).
     #[arg(long, default_value_t = 42)]
     seed: u64,
     /// Override any value (as in `squall run`).
@@ -78,16 +84,22 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         }
     };
     let map = args.map.to_string_lossy().to_string();
+    let start = start_of(args)?;
+    let start_name = match start {
+        Start::Drawn => "drawn",
+        Start::FirstNode => "first_node",
+    };
     let mut sets = vec![format!("topology.seed={}", args.seed)];
     match args.input.as_str() {
         "laser" => {
             sets.push(format!("source.params.world={}", quoted(&map)));
             sets.push(format!("source.params.duration_secs={}", args.duration));
+            sets.push(format!("source.params.start=\"{start_name}\""));
         }
         "depth" => {
             sets.push("source.kind=\"depth_sim\"".into());
             sets.push(format!(
-                "source.params={{ world = {}, duration_secs = {} }}",
+                "source.params={{ world = {}, duration_secs = {}, start = \"{start_name}\" }}",
                 quoted(&map),
                 args.duration
             ));
@@ -121,12 +133,26 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
     Ok(out)
 }
 
+/// The `--start` asked for.
+fn start_of(args: &LocalizeArgs) -> Result<Start, String> {
+    match args.start.as_str() {
+        "drawn" => Ok(Start::Drawn),
+        "first-node" => Ok(Start::FirstNode),
+        other => Err(format!("--start must be drawn or first-node, got {other}")),
+    }
+}
+
 /// Where the simulated robot starts (the simulator is deterministic per
 /// seed: this is the pose of its first scan).
 fn first_true_pose(map: &str, args: &LocalizeArgs) -> Result<(f64, f64, f64), String> {
     let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
-    let config =
-        SimConfig { seed: args.seed, duration_secs: args.duration, range_max: 8.0, ..SimConfig::default() };
+    let config = SimConfig {
+        seed: args.seed,
+        duration_secs: args.duration,
+        range_max: 8.0,
+        start: start_of(args)?,
+        ..SimConfig::default()
+    };
     // `new` checks the config first, as `config.check()` did here.
     Simulation::new(floor, config)
         .map_err(|e| e.to_string())?

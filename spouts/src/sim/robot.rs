@@ -42,6 +42,22 @@ pub struct SimConfig {
     /// How good the wheel odometry is. The default is
     /// [`OdometryQuality::Poor`].
     pub odometry: OdometryQuality,
+    /// Where the robot starts. The default is [`Start::FirstNode`].
+    pub start: Start,
+}
+
+/// Where a simulated robot starts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// At the floor's first node, facing its first neighbour: the same
+    /// start for every seed (SLAM's simulated runs).
+    #[default]
+    FirstNode,
+    /// Anywhere on the floor's roadmap, drawn per seed: a corridor drawn
+    /// in proportion to its length, a place along it, either way along it.
+    /// A localizer's claims then rest on many starts, not one.
+    Drawn,
 }
 
 /// How good a simulated robot's wheel odometry is: a systematic scale error
@@ -127,6 +143,7 @@ impl Default for SimConfig {
             max_speed: 0.6,
             max_turn: 0.8,
             odometry: OdometryQuality::default(),
+            start: Start::default(),
         }
     }
 }
@@ -196,9 +213,34 @@ pub struct Simulation {
     pending: Option<SimEvent>,
 }
 
+/// A start on `floor`'s roadmap: (pose, the node it comes from, the node it
+/// heads for). A corridor (edge) drawn in proportion to its length, a
+/// place along it, facing either of its ends.
+fn drawn_start(floor: &Floor, rng: &mut ChaCha8Rng) -> (Pose2, usize, usize) {
+    let length = |&(a, b): &(usize, usize)| {
+        let (p, q) = (floor.nodes[a], floor.nodes[b]);
+        (q.0 - p.0).hypot(q.1 - p.1)
+    };
+    let total: Real = floor.edges.iter().map(length).sum();
+    let mut at = rng.random::<Real>() * total;
+    let mut edge = floor.edges[floor.edges.len() - 1];
+    for e in &floor.edges {
+        if at < length(e) {
+            edge = *e;
+            break;
+        }
+        at -= length(e);
+    }
+    let (from, to) = if rng.random_bool(0.5) { edge } else { (edge.1, edge.0) };
+    let (p, q) = (floor.nodes[from], floor.nodes[to]);
+    let u = rng.random::<Real>();
+    let pose = Pose2::new(p.0 + u * (q.0 - p.0), p.1 + u * (q.1 - p.1), (q.1 - p.1).atan2(q.0 - p.0));
+    (pose, from, to)
+}
+
 impl Simulation {
-    /// Starts the robot at the floor's first node, facing its first
-    /// neighbour. An error if a setting is out of range
+    /// Starts the robot as `config.start` says: at the floor's first node,
+    /// facing its first neighbour, or drawn on the roadmap. An error if a setting is out of range
     /// ([`SimConfig::check`]), the floor is malformed ([`Floor::check`]) or
     /// no edge leaves its first node.
     pub fn new(floor: Floor, config: SimConfig) -> Result<Self> {
@@ -211,9 +253,14 @@ impl Simulation {
         let scale_bias = sign(&mut bias_rng) * bias_rng.random_range(errors.scale.clone());
         let heading_bias =
             sign(&mut bias_rng) * bias_rng.random_range(errors.heading_deg_per_m.clone()).to_radians();
-        let start = floor.nodes[0];
-        let heading = (floor.nodes[first].1 - start.1).atan2(floor.nodes[first].0 - start.0);
-        let truth = Pose2::new(start.0, start.1, heading);
+        let (truth, previous, target) = match config.start {
+            Start::FirstNode => {
+                let start = floor.nodes[0];
+                let heading = (floor.nodes[first].1 - start.1).atan2(floor.nodes[first].0 - start.0);
+                (Pose2::new(start.0, start.1, heading), 0, first)
+            }
+            Start::Drawn => drawn_start(&floor, &mut stream_for_purpose(config.seed, "start")),
+        };
         let steps_per_scan = (PHYSICS_HZ / config.scan_hz).round().max(1.0) as u64;
         let floor_nodes = floor.nodes.len();
         Ok(Simulation {
@@ -227,8 +274,8 @@ impl Simulation {
             config,
             step: 0,
             steps_per_scan,
-            target: first,
-            previous: 0,
+            target,
+            previous,
             visits: HashMap::new(),
             node_visits: vec![0; floor_nodes],
             plan: VecDeque::new(),
@@ -444,6 +491,38 @@ mod tests {
             last = Some((scan.odometry, truth));
         }
         (worst.abs().to_degrees(), driven)
+    }
+
+    #[test]
+    fn drawn_starts_differ_by_seed_and_lie_on_the_roadmap() {
+        let first_pose = |seed: u64, start: Start| {
+            let config = SimConfig { seed, start, duration_secs: 1.0, ..SimConfig::default() };
+            Simulation::new(office(1, 3, 2), config)
+                .unwrap()
+                .find_map(|e| match e {
+                    SimEvent::Scan(_, truth) => Some(truth),
+                    SimEvent::Odom(_) => None,
+                })
+                .unwrap()
+        };
+        let floor = office(1, 3, 2);
+        // The first node's start is every seed's.
+        assert_eq!(first_pose(1, Start::FirstNode), first_pose(2, Start::FirstNode));
+        let drawn: Vec<Pose2> = (1..=20).map(|seed| first_pose(seed, Start::Drawn)).collect();
+        assert_eq!(drawn[0], first_pose(1, Start::Drawn), "the same seed, the same start");
+        for (i, p) in drawn.iter().enumerate() {
+            // Within a step of a corridor of the roadmap (the first scan
+            // comes after a physics step), heading along it.
+            let on_corridor = floor.edges.iter().any(|&(a, b)| {
+                let (p0, p1) = (floor.nodes[a], floor.nodes[b]);
+                let (dx, dy) = (p1.0 - p0.0, p1.1 - p0.1);
+                let t = (((p.x - p0.0) * dx + (p.y - p0.1) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+                (p0.0 + t * dx - p.x).hypot(p0.1 + t * dy - p.y) < 0.05
+            });
+            assert!(on_corridor, "seed {}: {p:?}", i + 1);
+            let far = drawn.iter().filter(|q| q.distance(p) > 2.0).count();
+            assert!(far >= 15, "seed {}: starts spread over the floor, {far} of 20 farther than 2 m", i + 1);
+        }
     }
 
     #[test]

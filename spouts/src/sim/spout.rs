@@ -6,7 +6,7 @@ use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
-use super::robot::{OdometryQuality, SimConfig, SimEvent, Simulation};
+use super::robot::{OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 use super::{DEFAULT_WORLD, laser_range_for, top_speed_for};
 
 /// The `sim` spout's params; a param left out takes its value from
@@ -33,6 +33,9 @@ struct P {
     /// The wheel odometry: `"good"`, `"poor"` or `"bad"`
     /// ([`OdometryQuality`]). The default is `"poor"`.
     odometry: OdometryQuality,
+    /// Where the robot starts: `"first_node"` (the default) or `"drawn"`
+    /// per seed ([`Start`]).
+    start: Start,
 }
 
 impl Default for P {
@@ -46,6 +49,7 @@ impl Default for P {
             seed: None,
             max_scans: None,
             odometry: OdometryQuality::default(),
+            start: Start::default(),
         }
     }
 }
@@ -72,6 +76,7 @@ impl SimSpout {
             range_max: params.range_max.unwrap_or_else(|| laser_range_for(&params.world)),
             max_speed: top_speed_for(&params.world),
             odometry: params.odometry,
+            start: params.start,
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
