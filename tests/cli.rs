@@ -932,6 +932,15 @@ fn global_localization_converges_within_ten_seconds() {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     assert_eq!(lines.len(), truth.len() - 1, "one line per corrected scan");
+    // The estimate is the heaviest mode's weighted mean at every corrected
+    // scan (`estimate = "mode"`), not one particle's pose.
+    for line in &lines {
+        let stamp = line["stamp"].as_f64().unwrap();
+        let mode = &line["modes"][0]["pose"];
+        let at = estimate.iter().find(|e| (e.0 - stamp).abs() < 1e-6).unwrap();
+        let (x, y) = (mode["x"].as_f64().unwrap(), mode["y"].as_f64().unwrap());
+        assert!((at.1 - x).abs() < 1e-5 && (at.2 - y).abs() < 1e-5, "{stamp}: {at:?} against {mode}");
+    }
     assert!(lines[0]["modes"].as_array().unwrap().len() > 1, "{}", lines[0]);
     let last = &lines[lines.len() - 1]["modes"][0];
     let (x, y) = (last["pose"]["x"].as_f64().unwrap(), last["pose"]["y"].as_f64().unwrap());

@@ -140,8 +140,8 @@ impl Resampler {
 
 #[cfg(test)]
 mod tests {
-    use super::super::ModeSettings;
     use super::super::tasks::Gathered;
+    use super::super::{Estimate, ModeSettings};
     use super::*;
 
     /// A resampler of `tasks` matcher tasks that has decided for `step`
@@ -161,6 +161,8 @@ mod tests {
             dead: Vec::new(),
             deciding: Some(Deciding { step, parents: Vec::new(), holders: Vec::new() }),
             done: None,
+            estimate: Estimate::Best,
+            mode_at: None,
         }
     }
 

@@ -2,9 +2,11 @@
 //! after a correction it normalizes the weights, computes Neff, resamples
 //! selectively, assigns the new set to the tasks (Hungarian algorithm:
 //! equal load, fewest bytes moved) and broadcasts the decision. It owns the
-//! lineage tree, so it emits the best estimate for every reading on `pose`
-//! and, at the end, the best particle's trajectory on `trajectory`; per
-//! correction it emits the particle set's heaviest modes on `hypotheses`.
+//! lineage tree, so it emits the estimate for every reading on `pose` (the
+//! best particle's, or with `estimate = "mode"` the heaviest mode's
+//! weighted mean) and, at the end, the best particle's trajectory on
+//! `trajectory`; per correction it emits the particle set's heaviest modes
+//! on `hypotheses`.
 //! Metrics per correction: `neff_x100`, `resamplings`, `particles_moved`,
 //! `bytes_moved`, `resample_us` (resampling and assignment),
 //! `imbalance_us` (slowest matcher task's correction minus the mean: seed
@@ -56,6 +58,24 @@ struct ResamplerParams {
     /// ...and within this heading difference, radians. The default is 0.5.
     #[serde(default = "default_turn")]
     mode_turn: Real,
+    /// The pose emitted on `pose`: `"best"` (the default), the best
+    /// particle's; or `"mode"`, the weighted mean of the heaviest mode.
+    #[serde(default)]
+    estimate: Estimate,
+}
+
+/// Which pose the resampler emits as the estimate.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimate {
+    /// The best particle's pose (its lineage's: GMapping's estimate, right
+    /// for SLAM, whose map is the best particle's).
+    #[default]
+    Best,
+    /// The weighted mean of the heaviest mode (see `hypotheses`): for a
+    /// localizer, a pose that does not jump from particle to particle when
+    /// the weights say little, and that is the place most weight is in.
+    Mode,
 }
 
 fn default_keep() -> usize {
@@ -117,6 +137,11 @@ pub struct Resampler {
     deciding: Option<Deciding>,
     /// The last reading every task was heard for.
     done: Option<u64>,
+    /// Which pose is emitted as the estimate.
+    estimate: Estimate,
+    /// With [`Estimate::Mode`]: the heaviest mode's pose at the last
+    /// correction, and the odometry there.
+    mode_at: Option<(Pose2, Pose2)>,
 }
 
 impl Resampler {
@@ -147,6 +172,8 @@ impl Resampler {
             dead: Vec::new(),
             deciding: None,
             done: None,
+            estimate: params.estimate,
+            mode_at: None,
         })
     }
 
@@ -174,8 +201,15 @@ impl Resampler {
 
     async fn emit_estimate(&self, mark: (f64, Pose2), out: &mut Emitter) -> Result<(), BoxError> {
         let Some(p) = &self.population else { return Ok(()) };
-        let node = p.node(p.best());
-        let pose = node.pose.compose(&mark.1.relative_to(&node.odometry));
+        // Moved by the odometry since the correction it was taken at.
+        let (at, odometry) = match (self.estimate, self.mode_at) {
+            (Estimate::Mode, Some(mode_at)) => mode_at,
+            _ => {
+                let node = p.node(p.best());
+                (node.pose, node.odometry)
+            }
+        };
+        let pose = at.compose(&mark.1.relative_to(&odometry));
         out.emit("pose", PoseStamped { stamp: mark.0, pose }).await?;
         Ok(())
     }
@@ -244,10 +278,17 @@ impl Resampler {
         self.measured.push((mark.0, g.measured));
         out.emit("decision", decision).await?;
         let ModeSettings { keep, radius, turn } = self.modes;
-        if keep > 0 {
+        let by_mode = self.estimate == Estimate::Mode;
+        if keep > 0 || by_mode {
             let poses: Vec<Pose2> = poses.iter().map(|p| p.0).collect();
-            let found = modes(&poses, &d.weights, radius, turn, keep);
-            out.emit("hypotheses", Hypotheses { stamp: mark.0, modes: found }).await?;
+            let mut found = modes(&poses, &d.weights, radius, turn, keep.max(1));
+            if by_mode {
+                self.mode_at = found.first().map(|m| (m.pose, mark.1));
+            }
+            if keep > 0 {
+                found.truncate(keep);
+                out.emit("hypotheses", Hypotheses { stamp: mark.0, modes: found }).await?;
+            }
         }
         self.emit_estimate(mark, out).await
     }
