@@ -33,8 +33,9 @@ pub enum Init {
     /// Tracking: every particle at this pose.
     Known(Pose2),
     /// Global localization: poses the first reading supports (one of its
-    /// points on a wall; see `CgrModel::propose`), uniform over the map's
-    /// bounding box where no such pose is found.
+    /// points on a wall; see `CgrModel::propose`), uniform over the
+    /// building's inside (the map's bounding box without one) where no
+    /// such pose is found.
     Global,
 }
 
