@@ -10,7 +10,7 @@ use squall::builtin::wordcount::SentenceGen;
 
 mod common;
 
-use common::{LOG_PROGRESS, finish_within, logged_progress, relation_error, wait_for};
+use common::{LOG_PROGRESS, finish_within, logged_progress, relation_error, shared_data, wait_for};
 
 fn squall(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_squall"))
@@ -233,16 +233,6 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     assert!(text(&out.stdout).starts_with("topology \"probe\""), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(&log);
-}
-
-fn shared_data(rel: &str) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
-    assert!(
-        path.exists(),
-        "missing {}: this test reads the shared data set (../shared/data beside the repository)",
-        path.display()
-    );
-    path.to_string_lossy().into_owned()
 }
 
 #[test]

@@ -6,12 +6,8 @@ use squall::core::geometry::Pose2;
 use squall::core::interior::{DEFAULT_OPENING, Interior};
 use squall::spouts::sim::{SimConfig, SimEvent, Simulation, floor_for};
 
-/// A file of the shared data set (`../shared/data` beside the repository).
-fn shared_data(rel: &str) -> String {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
-    assert!(path.exists(), "missing {}: this test reads the shared data set", path.display());
-    path.to_string_lossy().into_owned()
-}
+mod common;
+use common::shared_data;
 
 /// The true poses of the simulated robot in `world` over `seconds`.
 fn driven(world: &str, seed: u64, seconds: f64) -> Vec<Pose2> {

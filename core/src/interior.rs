@@ -26,8 +26,8 @@ use crate::linemap::LineMap;
 pub const RESOLUTION: Real = 0.1;
 
 /// Cells of the inside's grid at most (the simulated campus, 70 400 m²
-/// at 0.1 m fits): with the distance transforms' working memory, about
-/// 200 MB while it is built, 8 MB after.
+/// at 0.1 m, fits): while it is built a cell takes two 8-byte distances
+/// and a few flags, after it one flag.
 pub const MAX_CELLS: usize = 8 << 20;
 
 /// The default widest gap in a building's outline that is closed, metres:
@@ -105,33 +105,14 @@ impl Interior {
         }
         let wall = rasterize(map, origin, resolution, width, height);
         let near_wall = squared_distances(&wall, width, height);
-        // The flood: 4-connected from the border, through cells farther
-        // than the half opening from every wall.
-        let passable = |i: usize| near_wall[i] > half * half;
+        // The flood: from the border, through cells farther than the half
+        // opening from every wall.
         let mut flooded = vec![false; width * height];
-        let mut stack: Vec<usize> = (0..width)
+        let border = (0..width)
             .flat_map(|x| [x, (height - 1) * width + x])
-            .chain((0..height).flat_map(|y| [y * width, y * width + width - 1]))
-            .collect();
-        while let Some(i) = stack.pop() {
-            if flooded[i] || !passable(i) {
-                continue;
-            }
-            flooded[i] = true;
-            let (x, y) = (i % width, i / width);
-            if x > 0 {
-                stack.push(i - 1);
-            }
-            if x + 1 < width {
-                stack.push(i + 1);
-            }
-            if y > 0 {
-                stack.push(i - width);
-            }
-            if y + 1 < height {
-                stack.push(i + width);
-            }
-        }
+            .chain((0..height).flat_map(|y| [y * width, y * width + width - 1]));
+        let passable = |i: usize| near_wall[i] > half * half;
+        fill(border, passable, &mut flooded, width, height, |_| {});
         // Grown back by the half opening: up to the walls, never across
         // one (a cell beyond a wall is farther than that from the flood).
         let near_flood = squared_distances(&flooded, width, height);
@@ -220,40 +201,62 @@ fn regions_holding(
     height: usize,
 ) -> Vec<bool> {
     let open = |i: usize| enclosed[i] && !wall[i];
-    let mut region = vec![u32::MAX; width * height];
+    let mut reached = vec![false; width * height];
     let mut keep = vec![false; width * height];
     let mut members = Vec::new();
     for start in 0..width * height {
-        if !open(start) || region[start] != u32::MAX {
+        if reached[start] || !open(start) {
             continue;
         }
         // One region, walked from `start`.
         members.clear();
-        let mut stack = vec![start];
-        region[start] = start as u32;
         let mut roomy = false;
-        while let Some(i) = stack.pop() {
+        fill([start], open, &mut reached, width, height, |i| {
             members.push(i);
             roomy |= near_wall[i] >= clearance_squared;
-            let (x, y) = (i % width, i / width);
-            let neighbours = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < width).then(|| i + 1),
-                (y > 0).then(|| i - width),
-                (y + 1 < height).then(|| i + width),
-            ];
-            for n in neighbours.into_iter().flatten() {
-                if open(n) && region[n] == u32::MAX {
-                    region[n] = start as u32;
-                    stack.push(n);
-                }
-            }
-        }
+        });
         if roomy {
             members.iter().for_each(|&i| keep[i] = true);
         }
     }
     keep
+}
+
+/// The 4-connected fill of a `width` × `height` grid from `seeds` through
+/// the cells `open` admits and `reached` does not hold yet: marks each in
+/// `reached` and hands it to `each`. A cell is marked as it is found, so
+/// the stack never holds more cells than the grid.
+fn fill(
+    seeds: impl IntoIterator<Item = usize>,
+    open: impl Fn(usize) -> bool,
+    reached: &mut [bool],
+    width: usize,
+    height: usize,
+    mut each: impl FnMut(usize),
+) {
+    let mut stack = Vec::new();
+    for seed in seeds {
+        if !reached[seed] && open(seed) {
+            reached[seed] = true;
+            stack.push(seed);
+        }
+    }
+    while let Some(i) = stack.pop() {
+        each(i);
+        let (x, y) = (i % width, i / width);
+        let neighbours = [
+            (x > 0).then(|| i - 1),
+            (x + 1 < width).then(|| i + 1),
+            (y > 0).then(|| i - width),
+            (y + 1 < height).then(|| i + width),
+        ];
+        for n in neighbours.into_iter().flatten() {
+            if !reached[n] && open(n) {
+                reached[n] = true;
+                stack.push(n);
+            }
+        }
+    }
 }
 
 /// The cells the map's walls pass through (each wall sampled every half

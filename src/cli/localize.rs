@@ -84,7 +84,11 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         }
     };
     let map = args.map.to_string_lossy().to_string();
-    let start = start_of(args)?;
+    let start = match args.start.as_str() {
+        "drawn" => Start::Drawn,
+        "first-node" => Start::FirstNode,
+        other => return Err(format!("--start must be drawn or first-node, got {other}")),
+    };
     let start_name = match start {
         Start::Drawn => "drawn",
         Start::FirstNode => "first_node",
@@ -118,9 +122,9 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
     match args.init.as_str() {
         "global" => sets.push("matcher.params.init=\"global\"".into()),
         "known" => {
-            let start = first_true_pose(&map, args)?;
+            let at = first_true_pose(&map, start, args)?;
             sets.push("matcher.params.init=\"known\"".into());
-            sets.push(format!("matcher.params.start=[{}, {}, {}]", start.0, start.1, start.2));
+            sets.push(format!("matcher.params.start=[{}, {}, {}]", at.0, at.1, at.2));
         }
         other => return Err(format!("--init must be known or global, got {other}")),
     }
@@ -133,24 +137,15 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
     Ok(out)
 }
 
-/// The `--start` asked for.
-fn start_of(args: &LocalizeArgs) -> Result<Start, String> {
-    match args.start.as_str() {
-        "drawn" => Ok(Start::Drawn),
-        "first-node" => Ok(Start::FirstNode),
-        other => Err(format!("--start must be drawn or first-node, got {other}")),
-    }
-}
-
-/// Where the simulated robot starts (the simulator is deterministic per
-/// seed: this is the pose of its first scan).
-fn first_true_pose(map: &str, args: &LocalizeArgs) -> Result<(f64, f64, f64), String> {
+/// Where the simulated robot starts from `start` (the simulator is
+/// deterministic per seed: this is the pose of its first scan).
+fn first_true_pose(map: &str, start: Start, args: &LocalizeArgs) -> Result<(f64, f64, f64), String> {
     let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
     let config = SimConfig {
         seed: args.seed,
         duration_secs: args.duration,
         range_max: 8.0,
-        start: start_of(args)?,
+        start,
         ..SimConfig::default()
     };
     // `new` checks the config first, as `config.check()` did here.

@@ -5,6 +5,18 @@
 pub(crate) mod certs;
 pub(crate) mod cluster;
 
+/// A file of the shared data set (`../shared/data` beside the repository),
+/// as a path string; fails the test, saying so, if it is missing.
+pub(crate) fn shared_data(rel: &str) -> String {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
+    assert!(
+        path.exists(),
+        "missing {}: this test reads the shared data set (../shared/data beside the repository)",
+        path.display()
+    );
+    path.to_string_lossy().into_owned()
+}
+
 /// A loopback TCP port nothing listens on, never the same twice in this
 /// test process: tests run in parallel, and the operating system may hand
 /// a port it just freed to the next test before the first test's server

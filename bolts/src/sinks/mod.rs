@@ -16,9 +16,14 @@ pub use trajectory_sink::TrajectorySink;
 
 use squall_core::trajectory::Trajectory;
 
-/// Writes `trajectory` to `path` in TUM format (atomically).
-pub fn write_tum(trajectory: &Trajectory, path: &Path) -> std::io::Result<()> {
-    write_atomic(path, trajectory.to_tum().as_bytes())
+/// Writes `trajectory` to `path` in TUM format (atomically), declaring
+/// the poses' `frame` in its first line if given.
+pub fn write_tum(trajectory: &Trajectory, frame: Option<&str>, path: &Path) -> std::io::Result<()> {
+    let text = match frame {
+        Some(frame) => trajectory.to_tum_in_frame(frame),
+        None => trajectory.to_tum(),
+    };
+    write_atomic(path, text.as_bytes())
 }
 
 /// Registers `sink.trajectory`, `sink.map` and `sink.hypotheses`.

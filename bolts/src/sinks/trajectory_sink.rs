@@ -12,7 +12,6 @@ use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tas
 
 use squall_core::sensor::{LaserReading, PoseStamped};
 use squall_core::trajectory::Trajectory;
-use squall_topology::fsio::write_atomic;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -86,11 +85,8 @@ impl Bolt for TrajectorySink {
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         out.count("poses", self.trajectory.len() as u64);
         if let Some(path) = &self.out {
-            let text = match &self.frame {
-                Some(frame) => self.trajectory.to_tum_in_frame(frame),
-                None => self.trajectory.to_tum(),
-            };
-            write_atomic(path, text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))?;
+            super::write_tum(&self.trajectory, self.frame.as_deref(), path)
+                .map_err(|e| format!("{}: {e}", path.display()))?;
         }
         Ok(())
     }

@@ -3,7 +3,6 @@
 
 use serde::Serialize;
 
-use crate::eval::relations::STAMP_TOLERANCE;
 use crate::geometry::{Pose2, normalize_angle};
 use crate::trajectory::Trajectory;
 
@@ -45,12 +44,8 @@ pub fn align(from: &[(f64, f64)], to: &[(f64, f64)]) -> Pose2 {
 
 /// Scores `estimate` against `truth` at their common stamps.
 pub fn score(estimate: &Trajectory, truth: &Trajectory) -> GroundTruthScore {
-    let pairs: Vec<(Pose2, Pose2)> = estimate
-        .stamps
-        .iter()
-        .zip(&estimate.poses)
-        .filter_map(|(t, p)| truth.at(*t, STAMP_TOLERANCE).map(|g| (*p, g)))
-        .collect();
+    let pairs: Vec<(Pose2, Pose2)> =
+        super::common_stamps(estimate, truth).into_iter().map(|(_, p, g)| (p, g)).collect();
     let from: Vec<(f64, f64)> = pairs.iter().map(|(p, _)| (p.x, p.y)).collect();
     let to: Vec<(f64, f64)> = pairs.iter().map(|(_, g)| (g.x, g.y)).collect();
     let t = align(&from, &to);

@@ -10,7 +10,6 @@
 
 use serde::Serialize;
 
-use crate::eval::relations::STAMP_TOLERANCE;
 use crate::geometry::{Pose2, normalize_angle};
 use crate::trajectory::Trajectory;
 
@@ -50,12 +49,7 @@ pub fn is_within(estimate: &Pose2, truth: &Pose2) -> bool {
 /// Scores `estimate` against `truth` at their common stamps, as they are.
 /// `None` if no stamp is common.
 pub fn score(estimate: &Trajectory, truth: &Trajectory) -> Option<MapFrameScore> {
-    let pairs: Vec<(f64, Pose2, Pose2)> = estimate
-        .stamps
-        .iter()
-        .zip(&estimate.poses)
-        .filter_map(|(&t, p)| truth.at(t, STAMP_TOLERANCE).map(|g| (t, *p, g)))
-        .collect();
+    let pairs = super::common_stamps(estimate, truth);
     let (&(first, _, _), &(_, last, last_truth)) = (pairs.first()?, pairs.last()?);
     let n = pairs.len() as f64;
     let (mut sum, mut max, mut rot_sum, mut rot_max, mut within) = (0.0, 0.0f64, 0.0, 0.0f64, 0usize);

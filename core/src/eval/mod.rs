@@ -14,6 +14,20 @@ pub mod ground_truth;
 pub mod map_frame;
 pub mod relations;
 
+use crate::geometry::Pose2;
+use crate::trajectory::Trajectory;
+
+/// (stamp, estimated pose, true pose) at every stamp of `estimate` that
+/// `truth` has a pose for (within [`relations::STAMP_TOLERANCE`]).
+pub(crate) fn common_stamps(estimate: &Trajectory, truth: &Trajectory) -> Vec<(f64, Pose2, Pose2)> {
+    estimate
+        .stamps
+        .iter()
+        .zip(&estimate.poses)
+        .filter_map(|(&t, p)| truth.at(t, relations::STAMP_TOLERANCE).map(|g| (t, *p, g)))
+        .collect()
+}
+
 /// Mean and population standard deviation.
 pub(crate) fn mean_std(values: &[f64]) -> (f64, f64) {
     if values.is_empty() {
