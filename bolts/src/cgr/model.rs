@@ -170,45 +170,100 @@ impl CgrModel {
         Pose2::new(x0 + rng.random::<Real>() * (x1 - x0), y0 + rng.random::<Real>() * (y1 - y0), theta)
     }
 
-    /// A pose at which one observed point, drawn at random, lies on a wall
-    /// drawn in proportion to length (at a random place along it, facing
-    /// it as its normal says), and the sensor sees that place: poses the
-    /// reading supports, where a uniform draw would almost never land
-    /// within CGR's reach of the robot. `None` when the draw fails (no
-    /// points, or the place is hidden from the sensor).
+    /// A pose the reading supports, or `None` when the draw fails (no
+    /// points, or a place hidden from the sensor or where the robot cannot
+    /// be). One observed point, drawn at random, is put on a wall drawn in
+    /// proportion to length, facing it as its normal says: that fixes the
+    /// heading. Where the reading holds a second point on a surface at
+    /// least [`CORNER_ANGLE`] apart, the position is then fixed too: that
+    /// point lies on a wall of the matching direction, drawn among those
+    /// where both points land on their walls (a corner or a pair of walls
+    /// seen together), and the two line constraints are solved for the
+    /// position. Otherwise the first point's place along its wall is drawn
+    /// at random. Either way the sensor must see both places. A draw of a
+    /// uniform pose would almost never land within CGR's reach of the
+    /// robot; a one-point draw lands on the right wall but anywhere along
+    /// it; a two-point draw is the robot's pose whenever both walls are
+    /// the right ones.
     fn propose(&self, obs: &Observation2d, rng: &mut ChaCha8Rng) -> Option<Pose2> {
         let total = *self.wall_lengths.last()?;
         if obs.points.is_empty() || total <= 0.0 {
             return None;
         }
         let i = rng.random_range(0..obs.points.len());
-        let (p, n) = (obs.points[i], obs.normals[i]);
-        let (p, n) = ((Real::from(p[0]), Real::from(p[1])), (Real::from(n[0]), Real::from(n[1])));
+        let p = point(obs, i);
+        let n = local_normal(obs, i);
+        let second = (0..CORNER_TRIES).find_map(|_| {
+            let j = rng.random_range(0..obs.points.len());
+            let m = local_normal(obs, j);
+            ((n.0 * m.1 - n.1 * m.0).abs() >= CORNER_ANGLE.to_radians().sin()).then_some(j)
+        });
         let at = rng.random::<Real>() * total;
-        let w =
-            &self.map.walls[self.wall_lengths.partition_point(|&l| l <= at).min(self.map.walls.len() - 1)];
-        let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
-        let length = ex.hypot(ey);
-        if length == 0.0 {
-            return None;
-        }
-        let u = rng.random::<Real>();
-        let q = (w.a.0 + u * ex, w.a.1 + u * ey);
+        let a = self.wall_lengths.partition_point(|&l| l <= at).min(self.map.walls.len() - 1);
+        let wall_a = Line::of(&self.map.walls[a])?;
         // The wall's normal on a side drawn at random; the observed normal
         // faces the sensor, so turned onto it the sensor is on that side.
         let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
-        let normal = (-ey * side / length, ex * side / length);
-        let theta = squall_core::geometry::normalize_angle(normal.1.atan2(normal.0) - n.1.atan2(n.0));
+        let facing = (wall_a.normal.0 * side, wall_a.normal.1 * side);
+        let theta = squall_core::geometry::normalize_angle(facing.1.atan2(facing.0) - n.1.atan2(n.0));
         let (s, c) = theta.sin_cos();
-        let robot = (q.0 - (c * p.0 - s * p.1), q.1 - (s * p.0 + c * p.1));
-        let sensor =
-            (robot.0 + c * obs.sensor.0 - s * obs.sensor.1, robot.1 + s * obs.sensor.0 + c * obs.sensor.1);
-        // Stop just short of the wall: the ray must reach it unblocked.
-        let (dx, dy) = (q.0 - sensor.0, q.1 - sensor.1);
-        let d = dx.hypot(dy);
-        let short = if d > 0.01 { (q.0 - 0.01 * dx / d, q.1 - 0.01 * dy / d) } else { sensor };
+        let turn = |v: (Real, Real)| (c * v.0 - s * v.1, s * v.0 + c * v.1);
+        let robot = match second {
+            Some(j) => {
+                let (q, m) = (point(obs, j), turn(local_normal(obs, j)));
+                let min_cos = self.options.cgr.normal_tolerance_deg.to_radians().cos();
+                // Reservoir sampling: one of the matching walls, uniformly,
+                // without collecting them.
+                let mut chosen = None;
+                let mut found = 0u32;
+                for (b, wall) in self.map.walls.iter().enumerate() {
+                    if b == a {
+                        continue;
+                    }
+                    let Some(wall_b) = Line::of(wall) else { continue };
+                    // Either side: the observed normal faces the sensor,
+                    // which puts it on the side the point was seen from.
+                    if (wall_b.normal.0 * m.0 + wall_b.normal.1 * m.1).abs() < min_cos {
+                        continue;
+                    }
+                    let Some(robot) = solve(&wall_a, turn(p), &wall_b, turn(q)) else { continue };
+                    let on = |line: &Line, v: (Real, Real)| line.covers((robot.0 + v.0, robot.1 + v.1));
+                    if !(on(&wall_a, turn(p)) && on(&wall_b, turn(q))) {
+                        continue;
+                    }
+                    found += 1;
+                    if rng.random_range(0..found) == 0 {
+                        chosen = Some(robot);
+                    }
+                }
+                let robot = chosen?;
+                let sensor = self.sensor_at(robot, turn(obs.sensor));
+                let seen = |v: (Real, Real)| sees(&self.map, sensor, (robot.0 + v.0, robot.1 + v.1));
+                if !(seen(turn(p)) && seen(turn(q))) {
+                    return None;
+                }
+                robot
+            }
+            None => {
+                let w = &self.map.walls[a];
+                let u = rng.random::<Real>();
+                let on_wall = (w.a.0 + u * (w.b.0 - w.a.0), w.a.1 + u * (w.b.1 - w.a.1));
+                let v = turn(p);
+                let robot = (on_wall.0 - v.0, on_wall.1 - v.1);
+                if !sees(&self.map, self.sensor_at(robot, turn(obs.sensor)), on_wall) {
+                    return None;
+                }
+                robot
+            }
+        };
         let pose = Pose2::new(robot.0, robot.1, theta);
-        (self.can_be_at(&pose) && self.map.clear(sensor, short)).then_some(pose)
+        self.can_be_at(&pose).then_some(pose)
+    }
+
+    /// The sensor's place for a robot at `robot` whose sensor offset,
+    /// turned into the map frame, is `offset`.
+    fn sensor_at(&self, robot: (Real, Real), offset: (Real, Real)) -> (Real, Real) {
+        (robot.0 + offset.0, robot.1 + offset.1)
     }
 
     /// The walls visible from `pose`: the grid's cell if the pose is on the
@@ -225,6 +280,98 @@ impl CgrModel {
         ids.dedup();
         Cow::Owned(ids)
     }
+}
+
+/// Two observed surfaces at least this far apart in direction, degrees,
+/// fix a proposed pose's position (see `CgrModel::propose`).
+const CORNER_ANGLE: Real = 30.0;
+
+/// Draws of a second point on a surface of another direction before a
+/// proposal falls back to one point.
+const CORNER_TRIES: usize = 8;
+
+/// Points within this distance of a point, on a surface of nearly its
+/// direction, average into its normal, metres: one beam's normal comes
+/// from its two neighbours and is off by degrees, which at a few metres
+/// puts a proposed pose tens of centimetres off.
+const NORMAL_RADIUS: Real = 0.4;
+
+/// An observed point, robot frame.
+fn point(obs: &Observation2d, i: usize) -> (Real, Real) {
+    (Real::from(obs.points[i][0]), Real::from(obs.points[i][1]))
+}
+
+/// The unit normal at point `i` averaged over the points near it whose
+/// normals agree within 30° (a local fit of its surface).
+fn local_normal(obs: &Observation2d, i: usize) -> (Real, Real) {
+    let (p, n) = (obs.points[i], obs.normals[i]);
+    let (mut sx, mut sy) = (0.0, 0.0);
+    for (q, m) in obs.points.iter().zip(&obs.normals) {
+        let (dx, dy) = (Real::from(q[0] - p[0]), Real::from(q[1] - p[1]));
+        let agree = Real::from(m[0] * n[0] + m[1] * n[1]);
+        if dx * dx + dy * dy <= NORMAL_RADIUS * NORMAL_RADIUS && agree >= 0.866 {
+            (sx, sy) = (sx + Real::from(m[0]), sy + Real::from(m[1]));
+        }
+    }
+    let norm = sx.hypot(sy);
+    if norm > 0.0 { (sx / norm, sy / norm) } else { (Real::from(n[0]), Real::from(n[1])) }
+}
+
+/// A wall as an oriented line: unit direction and normal, its first end
+/// and its length.
+struct Line {
+    a: (Real, Real),
+    direction: (Real, Real),
+    normal: (Real, Real),
+    length: Real,
+}
+
+/// How far past its ends a point may land on a wall, metres (the map's
+/// walls end where the mapper stopped them, not exactly at corners).
+const END_TOLERANCE: Real = 0.2;
+
+impl Line {
+    fn of(w: &squall_core::linemap::Segment) -> Option<Line> {
+        let (ex, ey) = (w.b.0 - w.a.0, w.b.1 - w.a.1);
+        let length = ex.hypot(ey);
+        (length > 0.0).then(|| {
+            let direction = (ex / length, ey / length);
+            Line { a: w.a, direction, normal: (-direction.1, direction.0), length }
+        })
+    }
+
+    /// The line's offset along its normal: n · x = offset on the line.
+    fn offset(&self) -> Real {
+        self.normal.0 * self.a.0 + self.normal.1 * self.a.1
+    }
+
+    /// Whether `x` (on the line) lies within the wall's extent.
+    fn covers(&self, x: (Real, Real)) -> bool {
+        let t = (x.0 - self.a.0) * self.direction.0 + (x.1 - self.a.1) * self.direction.1;
+        (-END_TOLERANCE..=self.length + END_TOLERANCE).contains(&t)
+    }
+}
+
+/// The robot position r at which r + `u` lies on `a`'s line and r + `v`
+/// on `b`'s; `None` when the lines are nearly parallel.
+fn solve(a: &Line, u: (Real, Real), b: &Line, v: (Real, Real)) -> Option<(Real, Real)> {
+    let (na, nb) = (a.normal, b.normal);
+    let det = na.0 * nb.1 - na.1 * nb.0;
+    if det.abs() < 0.25 {
+        return None;
+    }
+    let ra = a.offset() - (na.0 * u.0 + na.1 * u.1);
+    let rb = b.offset() - (nb.0 * v.0 + nb.1 * v.1);
+    Some(((ra * nb.1 - na.1 * rb) / det, (na.0 * rb - ra * nb.0) / det))
+}
+
+/// Whether a ray from `sensor` reaches `target` on a wall unblocked
+/// (stopping 1 cm short, so the wall itself does not block it).
+fn sees(map: &LineMap, sensor: (Real, Real), target: (Real, Real)) -> bool {
+    let (dx, dy) = (target.0 - sensor.0, target.1 - sensor.1);
+    let d = dx.hypot(dy);
+    let short = if d > 0.01 { (target.0 - 0.01 * dx / d, target.1 - 0.01 * dy / d) } else { sensor };
+    map.clear(sensor, short)
 }
 
 impl ParticleModel for CgrModel {
@@ -373,6 +520,37 @@ mod tests {
             m.scatter(&mut p, &obs, &mut rng);
             assert!(room_box(&p), "{p:?}");
         }
+    }
+
+    /// The robot at (5, 3) facing east sees the east wall and the north
+    /// wall's corner with it.
+    fn corner_seen() -> Observation2d {
+        let mut obs = east_wall_seen();
+        for k in 0..31 {
+            obs.points.push([2.0 + 0.1 * k as f32, 3.0]);
+            obs.normals.push([0.0, -1.0]);
+        }
+        obs
+    }
+
+    #[test]
+    fn two_surfaces_seen_fix_the_proposed_position() {
+        let m = model(true);
+        let truth = Pose2::new(5.0, 3.0, 0.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let share_at_truth = |obs: &Observation2d, rng: &mut ChaCha8Rng| {
+            let drawn: Vec<Pose2> = (0..4000).filter_map(|_| m.propose(obs, rng)).collect();
+            let at = drawn
+                .iter()
+                .filter(|p| p.distance(&truth) < 0.01 && (p.theta - truth.theta).abs() < 0.01)
+                .count();
+            at as Real / drawn.len() as Real
+        };
+        // One wall seen: the place along it is a guess.
+        assert!(share_at_truth(&east_wall_seen(), &mut rng) < 0.01);
+        // Two: every draw that takes both walls right is the pose itself.
+        let share = share_at_truth(&corner_seen(), &mut rng);
+        assert!(share > 0.05, "{share}");
     }
 
     #[test]
