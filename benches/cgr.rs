@@ -42,7 +42,12 @@ fn scan(map: &LineMap, pose: &Pose2, stamp: f64) -> Observation2d {
 
 /// Median ms per filter update.
 fn run(map: &Arc<LineMap>, grid: Option<Arc<SceneGrid>>, start: Pose2, particles: usize) -> f64 {
-    let options = LocalizeOptions { particles, init: Init::Known(start), ..LocalizeOptions::default() };
+    let options = LocalizeOptions {
+        particles,
+        min_particles: particles,
+        init: Init::Known(start),
+        ..LocalizeOptions::default()
+    };
     let mut filter =
         Filter::new(CgrModel::new(map.clone(), grid, options).expect("valid"), 1, 1).expect("one task");
     filter.process(&scan(map, &start, 0.0));

@@ -47,6 +47,7 @@ fn kidnapped(world: &str, at: f64, skip: f64, particles: usize) -> (f64, Vec<f64
         .collect();
     let options = LocalizeOptions {
         particles,
+        min_particles: particles,
         init: Init::Known(events[0].1),
         injection: Some(Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1 }),
         ..LocalizeOptions::default()

@@ -898,7 +898,9 @@ fn tum_xy(path: &Path) -> Vec<(f64, f64, f64)> {
 fn global_localization_converges_within_ten_seconds() {
     let map = shared_data("linemaps/CVAP7_vector.txt");
     let (dir, cache) = (out_dir("localize-global"), out_dir("localize-global-scenes"));
-    localize(&map, &dir, &cache, &["--duration", "15", "--init", "global", "--particles", "500"]);
+    // The defaults: 2000 particles where the first scan fits, fewer as
+    // they gather.
+    localize(&map, &dir, &cache, &["--duration", "15", "--init", "global"]);
     let (estimate, truth) = (tum_xy(&dir.join("trajectory.tum")), tum_xy(&dir.join("ground_truth.tum")));
     assert_eq!(estimate.len(), truth.len());
     let t0 = truth[0].0;
@@ -908,6 +910,14 @@ fn global_localization_converges_within_ten_seconds() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let converged = m["localization"]["converged_after_s"].as_f64();
     assert!(converged.is_some_and(|s| s > 0.0 && s <= 10.0), "{}", m["localization"]);
+    // KLD-sampling: the set shrinks to what tracking needs once the robot
+    // is found (one or two bins: at most n(2) = 67 particles).
+    let resampler = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "resampler").unwrap();
+    let particles = &resampler["custom"]["particles"];
+    assert!(
+        particles["p50"].as_u64().unwrap() <= 67 && particles["max"].as_u64().unwrap() >= 50,
+        "{particles}"
+    );
     let first_error = (estimate[0].1 - truth[0].1).hypot(estimate[0].2 - truth[0].2);
     assert!(first_error > 1.0, "the uniform start is not already at the robot ({first_error:.2} m)");
     for (e, t) in estimate.iter().zip(&truth).filter(|(_, t)| t.0 - t0 >= 10.0) {
@@ -936,7 +946,16 @@ fn global_localization_converges_within_ten_seconds() {
     let (x, y) = (last["pose"]["x"].as_f64().unwrap(), last["pose"]["y"].as_f64().unwrap());
     let t = truth[truth.len() - 1];
     assert!((x - t.1).hypot(y - t.2) < 0.2 && last["weight"].as_f64().unwrap() > 0.9, "{last}");
+    // The set's size changes, over tasks too: two matchers write the same
+    // bytes.
+    let two = out_dir("localize-global-k2");
+    localize(&map, &two, &cache, &["--duration", "15", "--init", "global", "--matchers", "2"]);
+    for file in ["trajectory.tum", "hypotheses.jsonl"] {
+        let (a, b) = (std::fs::read(dir.join(file)).unwrap(), std::fs::read(two.join(file)).unwrap());
+        assert!(a == b, "{file} differs between 1 and 2 matcher tasks");
+    }
     let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&two);
     let _ = std::fs::remove_dir_all(&cache);
 }
 
@@ -947,13 +966,15 @@ fn global_localization_never_reports_a_pose_outside_the_building() {
     let walls = squall::core::linemap::LineMap::load(Path::new(&map)).unwrap();
     let inside = Interior::of(&walls, DEFAULT_OPENING).unwrap();
     let (dir, cache) = (out_dir("localize-inside"), out_dir("localize-inside-scenes"));
-    // Issue 24's report: started at the roadmap's first node, seeds 3 and
-    // 6 do not converge from a uniform start, and their sets used to leave
-    // the building through its outer wall, ending tens of metres outside;
-    // kept inside, no estimate of theirs is outside.
+    // Issue 24's report: started at the roadmap's first node, the sets of
+    // seeds 3 and 6 used to leave the building through its outer wall,
+    // ending tens of metres outside; kept inside, no estimate of theirs
+    // is outside. (Since proposals take two surfaces, their sets stay in
+    // even without the inside; the model's unit tests check that without
+    // it proposals land outside.)
     let outside = |seed: &str, keep: &str| {
         let keep = format!("matcher.params.keep_inside={keep}");
-        let global = ["--duration", "15", "--init", "global", "--particles", "500", "--start", "first-node"];
+        let global = ["--duration", "15", "--init", "global", "--start", "first-node"];
         let args = [&global[..], &["--seed", seed, "--set", &keep]].concat();
         localize(&map, &dir, &cache, &args);
         let estimates = tum_xy(&dir.join("trajectory.tum"));
@@ -962,7 +983,6 @@ fn global_localization_never_reports_a_pose_outside_the_building() {
     for seed in ["3", "6"] {
         assert_eq!(outside(seed, "true"), 0, "seed {seed}");
     }
-    assert!(outside("6", "false") > 50, "without the inside, seed 6 leaves the building");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&cache);
 }

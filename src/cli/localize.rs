@@ -31,9 +31,11 @@ pub(super) struct LocalizeArgs {
     /// plane filtered by FSPF).
     #[arg(long, value_name = "laser|depth", default_value = "laser")]
     input: String,
-    /// Particles.
-    #[arg(long, default_value_t = 50)]
-    particles: usize,
+    /// Particles at the start. A global start begins with this many
+    /// (default 2000) and keeps fewer as they gather (KLD-sampling), down
+    /// to 50; a known start keeps this many (default 50).
+    #[arg(long)]
+    particles: Option<usize>,
     /// Matcher tasks (the results do not depend on it).
     #[arg(long, default_value_t = 1)]
     matchers: usize,
@@ -61,6 +63,15 @@ pub(super) struct LocalizeArgs {
     out: PathBuf,
 }
 
+/// Particles a global start begins with: where the first reading fits
+/// (see `CgrModel::propose`), enough that the robot's pose is among them
+/// on the shared maps (docs/results/localization-global.md).
+const GLOBAL_PARTICLES: usize = 2000;
+
+/// Particles that track a robot already found (and the fewest a global
+/// start keeps).
+const TRACKING_PARTICLES: usize = 50;
+
 fn quoted(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
 }
@@ -69,7 +80,7 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
     if !args.sim {
         return Err("--sim is required: recorded depth and laser input come later".into());
     }
-    if args.matchers == 0 || args.particles == 0 {
+    if args.matchers == 0 || args.particles == Some(0) {
         return Err("--matchers and --particles must be at least 1".into());
     }
     if !(args.duration.is_finite() && args.duration > 0.0) {
@@ -116,13 +127,20 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
     sets.extend([
         format!("matcher.parallelism={}", args.matchers),
         format!("matcher.params.map={}", quoted(&map)),
-        format!("matcher.params.particles={}", args.particles),
         format!("matcher.params.resampling={}", quoted(scheme)),
     ]);
     match args.init.as_str() {
-        "global" => sets.push("matcher.params.init=\"global\"".into()),
+        "global" => {
+            let particles = args.particles.unwrap_or(GLOBAL_PARTICLES);
+            sets.push("matcher.params.init=\"global\"".into());
+            sets.push(format!("matcher.params.particles={particles}"));
+            sets.push(format!("matcher.params.min_particles={}", particles.min(TRACKING_PARTICLES)));
+        }
         "known" => {
             let at = first_true_pose(&map, start, args)?;
+            let particles = args.particles.unwrap_or(TRACKING_PARTICLES);
+            sets.push(format!("matcher.params.particles={particles}"));
+            sets.push(format!("matcher.params.min_particles={particles}"));
             sets.push("matcher.params.init=\"known\"".into());
             sets.push(format!("matcher.params.start=[{}, {}, {}]", at.0, at.1, at.2));
         }

@@ -50,7 +50,10 @@ impl HostedModel for CgrModel {
 struct CgrParams {
     /// The line-map file (required).
     map: PathBuf,
+    /// Particles at the start (the most, with `min_particles` fewer).
     particles: usize,
+    /// The fewest KLD-sampling keeps (default: `particles`, a fixed set).
+    min_particles: Option<usize>,
     /// `"known"` (then `start` = [x, y, θ]) or `"global"`.
     init: String,
     start: Option<[Real; 3]>,
@@ -96,6 +99,7 @@ impl Default for CgrParams {
         CgrParams {
             map: PathBuf::new(),
             particles: o.particles,
+            min_particles: None,
             init: "global".into(),
             start: None,
             resampling: o.resampling,
@@ -186,6 +190,7 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
     };
     let options = LocalizeOptions {
         particles: p.particles,
+        min_particles: p.min_particles.unwrap_or(p.particles),
         cgr,
         motion: MotionNoise { srr: p.srr, srt: p.srt, str: p.str, stt: p.stt },
         init,

@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::cgr::measurement::{CgrOptions, refine};
 use crate::cgr::observation::Observation2d;
 use crate::cgr::scene_grid::SceneGrid;
+use crate::pf::kld::Kld;
 use crate::pf::model::{Correction, Injection, ParticleModel};
 use crate::pf::resample::Scheme;
 use crate::slam::model::OdometryStep;
@@ -42,8 +43,12 @@ pub enum Init {
 /// Localization settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LocalizeOptions {
-    /// Particles.
+    /// Particles at the start: with `min_particles` fewer, the most
+    /// KLD-sampling keeps.
     pub particles: usize,
+    /// The fewest particles KLD-sampling keeps once the set has found the
+    /// robot; equal to `particles`, the set keeps its size.
+    pub min_particles: usize,
     /// Measurement and refinement.
     pub cgr: CgrOptions,
     /// Motion noise.
@@ -68,6 +73,7 @@ impl Default for LocalizeOptions {
     fn default() -> Self {
         LocalizeOptions {
             particles: 50,
+            min_particles: 50,
             cgr: CgrOptions::default(),
             motion: MotionNoise { srr: 0.1, srt: 0.2, str: 0.1, stt: 0.2 },
             init: Init::Global,
@@ -112,6 +118,17 @@ impl CgrModel {
         options.cgr.check()?;
         if options.particles == 0 {
             return Err(crate::Error::Setting("particles must be at least 1".into()));
+        }
+        if options.min_particles < options.particles {
+            let kld = Kld::new(options.min_particles, options.particles);
+            kld.check()?;
+            if options.resampling == Scheme::Ring {
+                return Err(crate::Error::Setting(
+                    "min_particles below particles (KLD-sampling) needs low_variance or aggregation \
+                     resampling: the ring keeps the set's size"
+                        .into(),
+                ));
+            }
         }
         if let Some(i) = options.injection {
             if !(0.0 < i.alpha_slow && i.alpha_slow < i.alpha_fast && i.alpha_fast <= 1.0) {
@@ -400,6 +417,11 @@ impl ParticleModel for CgrModel {
 
     fn injection(&self) -> Option<Injection> {
         self.options.injection
+    }
+
+    fn kld(&self) -> Option<Kld> {
+        let o = &self.options;
+        (o.min_particles < o.particles).then(|| Kld::new(o.min_particles, o.particles))
     }
 
     fn inject(&self, pose: &mut Pose2, reading: &Observation2d, rng: &mut ChaCha8Rng) {

@@ -139,6 +139,7 @@ where
                 model.resample_threshold(),
                 model.resampling(),
                 model.injection().map(|i| (i, &fits[..])),
+                model.kld(),
             )
             .expect("the shards between them hold every slot once, so every particle reports");
         let parents = &decision.parents;

@@ -9,6 +9,7 @@
 pub(crate) mod assign;
 pub mod filter;
 pub mod kinds;
+pub mod kld;
 pub mod model;
 pub(crate) mod modes;
 pub mod population;

@@ -111,6 +111,12 @@ pub trait ParticleModel: Send + Sync + 'static {
         1.0 / self.particles() as Real
     }
 
+    /// KLD-sampling of the set's size at each resampling (see
+    /// [`crate::pf::kld`]); the default keeps [`Self::particles`].
+    fn kld(&self) -> Option<crate::pf::kld::Kld> {
+        None
+    }
+
     /// Resample when Neff falls below this fraction of the particles.
     fn resample_threshold(&self) -> Real;
 

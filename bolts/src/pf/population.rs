@@ -8,6 +8,7 @@ use std::sync::Arc;
 use rand::RngExt;
 use squall_core::geometry::{Pose2, Real};
 
+use crate::pf::kld::Kld;
 use crate::pf::model::Injection;
 use crate::pf::resample::{Scheme, draw, normalize};
 use squall_core::random::stream_for_step;
@@ -66,6 +67,9 @@ pub struct Population {
     /// log of augmented MCL's slow and fast averages of the mean
     /// likelihood.
     averages: Option<(Real, Real)>,
+    /// Particles at the start: the weights' smoothing is per particle of
+    /// the starting set, so that a set KLD-sampling resizes keeps it.
+    start_len: usize,
 }
 
 impl Population {
@@ -78,6 +82,7 @@ impl Population {
             lineage_weights: vec![0.0; n],
             nodes: poses.iter().map(|&pose| Arc::new(Node { stamp, pose, odometry, parent: None })).collect(),
             averages: None,
+            start_len: n,
         }
     }
 
@@ -94,7 +99,10 @@ impl Population {
     /// Takes the corrected reading `step` (its stamp and odometry) with
     /// each slot's refined pose and log-likelihood, in slot order: weights,
     /// Neff, resampling by `scheme` below `threshold` × N (weights smoothed
-    /// by `smoothing` × N), and the lineage extended by the new poses.
+    /// by `smoothing` × N at the start), and the lineage extended by the
+    /// new poses. With `kld`, a resampling draws as many particles as
+    /// KLD-sampling asks for (the ring, which draws each slot from its
+    /// neighbours, keeps the count).
     #[allow(clippy::too_many_arguments)]
     pub fn correct(
         &mut self,
@@ -105,6 +113,7 @@ impl Population {
         threshold: Real,
         scheme: Scheme,
         injection: Option<(Injection, &[Real])>,
+        kld: Option<Kld>,
     ) -> crate::Result<Decision> {
         if reports.len() != self.len() {
             return Err(crate::Error::ReportCount { particles: self.len(), reports: reports.len() });
@@ -113,10 +122,18 @@ impl Population {
             self.log_weights[slot] += l;
             self.lineage_weights[slot] += l;
         }
-        let (weights, neff) = normalize(&self.log_weights, smoothing);
         let n = self.len();
+        let (weights, neff) = normalize(&self.log_weights, smoothing * self.start_len as Real / n as Real);
         let resampled = neff < threshold * n as Real;
-        let mut parents = if resampled { draw(scheme, &weights, self.seed, step) } else { (0..n).collect() };
+        let count = match kld {
+            Some(k) if resampled && scheme != Scheme::Ring => {
+                let poses: Vec<Pose2> = reports.iter().map(|r| r.0).collect();
+                k.count(&weights, &poses, self.seed, step)
+            }
+            _ => n,
+        };
+        let mut parents =
+            if resampled { draw(scheme, &weights, self.seed, step, count) } else { (0..n).collect() };
         if resampled {
             self.avoid_lost(&mut parents);
         }
@@ -131,7 +148,7 @@ impl Population {
         self.nodes = nodes;
         if resampled {
             self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
-            self.log_weights.fill(0.0);
+            self.log_weights = vec![0.0; parents.len()];
         }
         let fresh = match injection {
             Some((i, fits)) => self.fresh_slots(step, fits, i),
@@ -165,7 +182,7 @@ impl Population {
         if p <= 0.0 {
             return Vec::new();
         }
-        (0..fits.len())
+        (0..self.len())
             .filter(|&j| stream_for_step(self.seed, step, INJECTION_STREAM + j as u64).random::<Real>() < p)
             .collect()
     }
@@ -236,12 +253,48 @@ mod tests {
         let mut p = Population::start(&[at(0.0); 4], 7, 0.0, at(0.0));
         let reports: Vec<(Pose2, Real)> =
             [(1.0, -900.0), (2.0, 0.0), (3.0, -900.0), (4.0, -900.0)].map(|(x, l)| (at(x), l)).to_vec();
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None).unwrap();
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None, None).unwrap();
         assert!(d.resampled && d.neff < 2.0, "{d:?}");
         assert_eq!(d.parents, vec![1, 1, 1, 1]);
         assert_eq!(d.best, 3, "equal lineage weights: the last slot");
         let t = p.best_trajectory();
         assert_eq!(t.iter().map(|n| n.1.x).collect::<Vec<_>>(), vec![0.0, 2.0]);
+    }
+
+    #[test]
+    fn kld_sampling_resizes_the_set_and_the_lineage_follows() {
+        // 400 particles over 40 places, 10 m apart: one place fits.
+        let n = 400;
+        let mut p = Population::start(&vec![at(0.0); n], 7, 0.0, at(0.0));
+        let kld = Some(Kld::new(20, n));
+        let reports: Vec<(Pose2, Real)> =
+            (0..n).map(|j| (at(10.0 * (j % 40) as Real), if j % 40 == 3 { 0.0 } else { -50.0 })).collect();
+        let d = p
+            .correct(1, (1.0, at(1.0)), &reports, 1.0 / n as Real, 0.5, Scheme::LowVariance, None, kld)
+            .unwrap();
+        assert!(d.resampled);
+        assert_eq!(d.parents.len(), 20, "one place found: the fewest particles");
+        assert_eq!(p.len(), 20);
+        assert!(d.parents.iter().all(|&j| j % 40 == 3), "{:?}", d.parents);
+        assert!(p.best_trajectory().last().is_some_and(|n| n.1.x == 30.0));
+        // The next reading reports for the new set; a spread set grows it
+        // back, up to the most.
+        let spread: Vec<(Pose2, Real)> =
+            (0..20).map(|j| (Pose2::new(3.0 * j as Real, 0.0, 0.3 * j as Real), -(j as Real))).collect();
+        assert!(
+            p.correct(2, (2.0, at(2.0)), &reports, 1.0 / n as Real, 0.5, Scheme::LowVariance, None, kld)
+                .is_err()
+        );
+        let d = p
+            .correct(2, (2.0, at(2.0)), &spread, 1.0 / n as Real, 2.0, Scheme::LowVariance, None, kld)
+            .unwrap();
+        assert!(d.parents.len() > 20 && p.len() == d.parents.len(), "{}", d.parents.len());
+        // Without KLD the count stays.
+        let mut q = Population::start(&vec![at(0.0); n], 7, 0.0, at(0.0));
+        let d = q
+            .correct(1, (1.0, at(1.0)), &reports, 1.0 / n as Real, 0.5, Scheme::LowVariance, None, None)
+            .unwrap();
+        assert_eq!(d.parents.len(), n);
     }
 
     #[test]
@@ -254,8 +307,9 @@ mod tests {
             .map(|(x, l)| (at(x), l))
             .to_vec();
         // An infinite threshold forces resampling, as after a loss.
-        let d =
-            p.correct(1, (1.0, at(1.0)), &reports, 3.0, Real::INFINITY, Scheme::LowVariance, None).unwrap();
+        let d = p
+            .correct(1, (1.0, at(1.0)), &reports, 3.0, Real::INFINITY, Scheme::LowVariance, None, None)
+            .unwrap();
         assert!(d.resampled);
         assert!(!d.parents.contains(&3), "{:?}", d.parents);
         assert_eq!(d.weights[3], 0.0);
@@ -267,7 +321,7 @@ mod tests {
     fn without_resampling_weights_accumulate_and_slots_keep_their_parents() {
         let mut p = Population::start(&[at(0.0); 3], 7, 0.0, at(0.0));
         let reports = vec![(at(1.0), -1.0), (at(2.0), -1.1), (at(3.0), -1.2)];
-        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None).unwrap();
+        let d = p.correct(1, (1.0, at(1.0)), &reports, 3.0, 0.5, Scheme::LowVariance, None, None).unwrap();
         assert!(!d.resampled);
         assert_eq!((d.parents, d.best), (vec![0, 1, 2], 0));
         assert_eq!(p.lineage_weight(2), -1.2);
@@ -279,6 +333,7 @@ mod tests {
                 3.0,
                 0.5,
                 Scheme::LowVariance,
+                None,
                 None,
             )
             .unwrap();
@@ -302,6 +357,7 @@ mod tests {
                     0.5,
                     Scheme::LowVariance,
                     injection.map(|i| (i, &fits[..])),
+                    None,
                 )
                 .unwrap();
             assert!(d.fresh.is_empty(), "step {step}: {} injected", d.fresh.len());
@@ -323,6 +379,7 @@ mod tests {
                 0.5,
                 Scheme::LowVariance,
                 injection.map(|i| (i, &fits[..])),
+                None,
             )
             .unwrap()
             .fresh

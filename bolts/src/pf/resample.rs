@@ -26,14 +26,15 @@ pub enum Scheme {
     Aggregation,
 }
 
-/// The parent of each new particle under `scheme`, with draws keyed by
-/// the run seed, the reading and the particle.
-pub fn draw(scheme: Scheme, weights: &[Real], seed: u64, step: u64) -> Vec<usize> {
+/// The parents of `count` new particles under `scheme`, with draws keyed
+/// by the run seed, the reading and the particle (the ring draws one per
+/// old particle, whatever `count`).
+pub fn draw(scheme: Scheme, weights: &[Real], seed: u64, step: u64, count: usize) -> Vec<usize> {
     let n = weights.len();
     match scheme {
         Scheme::LowVariance => {
             let u = stream_for_step(seed, step, u64::MAX).random::<Real>();
-            low_variance(weights, u)
+            low_variance(weights, u, count)
         }
         Scheme::Ring => (0..n)
             .map(|i| {
@@ -57,7 +58,7 @@ pub fn draw(scheme: Scheme, weights: &[Real], seed: u64, step: u64) -> Vec<usize
                 sum += w;
                 cumulative.push(sum);
             }
-            (0..n)
+            (0..count)
                 .map(|i| {
                     let beta = stream_for_step(seed, step, i as u64).random::<Real>() * sum;
                     cumulative.partition_point(|&c| c < beta).min(n - 1)
@@ -80,14 +81,14 @@ pub fn normalize(log_weights: &[Real], ogain: Real) -> (Vec<Real>, Real) {
     (w, neff)
 }
 
-/// Low-variance (systematic) resampling: `weights.len()` indices, drawn
-/// with one random offset `u` in [0, 1).
-pub fn low_variance(weights: &[Real], u: Real) -> Vec<usize> {
+/// Low-variance (systematic) resampling: `count` indices into `weights`,
+/// drawn with one random offset `u` in [0, 1).
+pub fn low_variance(weights: &[Real], u: Real, count: usize) -> Vec<usize> {
     let n = weights.len();
-    let step = 1.0 / n as Real;
-    let mut out = Vec::with_capacity(n);
+    let step = 1.0 / count as Real;
+    let mut out = Vec::with_capacity(count);
     let (mut i, mut cumulative) = (0, weights[0]);
-    for m in 0..n {
+    for m in 0..count {
         let target = (u + m as Real) * step;
         while target > cumulative && i + 1 < n {
             i += 1;
@@ -105,7 +106,7 @@ mod tests {
     fn frequencies(scheme: Scheme, weights: &[Real], runs: u64) -> Vec<Real> {
         let mut counts = vec![0usize; weights.len()];
         for step in 0..runs {
-            for p in draw(scheme, weights, 3, step) {
+            for p in draw(scheme, weights, 3, step, weights.len()) {
                 counts[p] += 1;
             }
         }
@@ -125,7 +126,7 @@ mod tests {
     fn the_ring_draws_only_from_neighbours_and_favours_weight() {
         let weights = [0.0, 0.0, 0.9, 0.0, 0.0, 0.1];
         for step in 0..200 {
-            let picks = draw(Scheme::Ring, &weights, 3, step);
+            let picks = draw(Scheme::Ring, &weights, 3, step, 6);
             assert_eq!(picks.len(), 6);
             for (i, &p) in picks.iter().enumerate() {
                 let d = (p + 6 - i) % 6;
@@ -142,7 +143,8 @@ mod tests {
     #[test]
     fn low_variance_through_draw_is_the_systematic_scheme() {
         let weights = [0.25; 4];
-        assert_eq!(draw(Scheme::LowVariance, &weights, 1, 1), vec![0, 1, 2, 3]);
+        assert_eq!(draw(Scheme::LowVariance, &weights, 1, 1, 4), vec![0, 1, 2, 3]);
+        assert_eq!(draw(Scheme::LowVariance, &weights, 1, 1, 8), vec![0, 0, 1, 1, 2, 2, 3, 3]);
     }
 
     #[test]
@@ -159,7 +161,7 @@ mod tests {
         let weights = [0.7, 0.1, 0.15, 0.05];
         let mut counts = [0usize; 4];
         for k in 0..1000 {
-            let picks = low_variance(&weights, k as f64 / 1000.0);
+            let picks = low_variance(&weights, k as f64 / 1000.0, 4);
             assert_eq!(picks.len(), 4);
             assert!(picks.windows(2).all(|w| w[0] <= w[1]), "systematic picks are ordered");
             for p in picks {
@@ -171,7 +173,7 @@ mod tests {
         }
         // Low variance: a 0.7 particle is picked 2 or 3 times of 4, never 0 or 4.
         for k in 0..100 {
-            let n = low_variance(&weights, k as f64 / 100.0).iter().filter(|&&p| p == 0).count();
+            let n = low_variance(&weights, k as f64 / 100.0, 4).iter().filter(|&&p| p == 0).count();
             assert!((2..=3).contains(&n));
         }
     }

@@ -227,6 +227,7 @@ impl<M: HostedModel> Matcher<M> {
             scheme: self.model.resampling(),
             injection: self.model.injection(),
             trajectory: self.model.trajectory_output(),
+            kld: self.model.kld(),
         }
     }
 

@@ -4,6 +4,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use crate::pf::kld::Kld;
 use crate::pf::model::Injection;
 use crate::pf::resample::Scheme;
 use crate::pf::shard::SlotReport;
@@ -44,6 +45,8 @@ pub struct Settings {
     pub injection: Option<Injection>,
     /// How the written trajectory is made from the best lineage.
     pub trajectory: TrajectoryOutput,
+    /// KLD-sampling of the set's size, if the model asks for it.
+    pub kld: Option<Kld>,
 }
 
 /// Matcher task → resampler.

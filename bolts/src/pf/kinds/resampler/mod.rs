@@ -249,6 +249,7 @@ impl Resampler {
             if any_dead { Real::INFINITY } else { settings.threshold },
             settings.scheme,
             settings.injection.map(|i| (i, &fits[..])),
+            settings.kld,
         )?;
         let holders = self.task_of.clone();
         if d.resampled {
@@ -256,6 +257,7 @@ impl Resampler {
         }
         out.record("resample_us", started.elapsed().as_micros() as u64);
         out.record("neff_x100", (d.neff * 100.0) as u64);
+        out.record("particles", d.parents.len() as u64);
         out.count("resamplings", u64::from(d.resampled));
         let mean = g.busy_us.iter().sum::<u64>() as f64 / g.busy_us.len().max(1) as f64;
         let slowest = g.busy_us.iter().copied().max().unwrap_or(0);
