@@ -65,7 +65,7 @@ pub(super) struct LocalizeArgs {
 
 /// Particles a global start begins with: where the first reading fits
 /// (see `CgrModel::propose`), enough that the robot's pose is among them
-/// on the shared maps (docs/results/localization-global.md).
+/// on the shared maps (docs/results/localization.md, decision 0018).
 const GLOBAL_PARTICLES: usize = 2000;
 
 /// Particles that track a robot already found (and the fewest a global

@@ -94,6 +94,9 @@ pub struct CgrModel {
     /// Running total of wall lengths, wall by wall (for drawing a wall
     /// in proportion to its length).
     wall_lengths: Vec<Real>,
+    /// Each wall as an oriented line (`None` for a zero-length one), for
+    /// proposals, which test every wall.
+    lines: Vec<Option<Line>>,
     /// Where the robot can be; `None` where not asked for, or where the
     /// map encloses nothing (an open site).
     interior: Option<Arc<Interior>>,
@@ -167,7 +170,8 @@ impl CgrModel {
             }
             None => None,
         };
-        Ok(CgrModel { map, scenes, options, wall_lengths, interior })
+        let lines = map.walls.iter().map(Line::of).collect();
+        Ok(CgrModel { map, scenes, options, wall_lengths, lines, interior })
     }
 
     /// Whether the robot can be at `pose`'s position (anywhere, without an
@@ -210,14 +214,15 @@ impl CgrModel {
         let i = rng.random_range(0..obs.points.len());
         let p = point(obs, i);
         let n = local_normal(obs, i);
+        let min_sin = CORNER_ANGLE.to_radians().sin();
         let second = (0..CORNER_TRIES).find_map(|_| {
             let j = rng.random_range(0..obs.points.len());
             let m = local_normal(obs, j);
-            ((n.0 * m.1 - n.1 * m.0).abs() >= CORNER_ANGLE.to_radians().sin()).then_some(j)
+            ((n.0 * m.1 - n.1 * m.0).abs() >= min_sin).then_some((j, m))
         });
         let at = rng.random::<Real>() * total;
         let a = self.wall_lengths.partition_point(|&l| l <= at).min(self.map.walls.len() - 1);
-        let wall_a = Line::of(&self.map.walls[a])?;
+        let wall_a = self.lines[a].as_ref()?;
         // The wall's normal on a side drawn at random; the observed normal
         // faces the sensor, so turned onto it the sensor is on that side.
         let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
@@ -225,27 +230,28 @@ impl CgrModel {
         let theta = squall_core::geometry::normalize_angle(facing.1.atan2(facing.0) - n.1.atan2(n.0));
         let (s, c) = theta.sin_cos();
         let turn = |v: (Real, Real)| (c * v.0 - s * v.1, s * v.0 + c * v.1);
+        let sensor_at = |robot: (Real, Real)| {
+            let offset = turn(obs.sensor);
+            (robot.0 + offset.0, robot.1 + offset.1)
+        };
         let robot = match second {
-            Some(j) => {
-                let (q, m) = (point(obs, j), turn(local_normal(obs, j)));
+            Some((j, m)) => {
+                let (q, m) = (point(obs, j), turn(m));
                 let min_cos = self.options.cgr.normal_tolerance_deg.to_radians().cos();
                 // Reservoir sampling: one of the matching walls, uniformly,
                 // without collecting them.
                 let mut chosen = None;
                 let mut found = 0u32;
-                for (b, wall) in self.map.walls.iter().enumerate() {
-                    if b == a {
-                        continue;
-                    }
-                    let Some(wall_b) = Line::of(wall) else { continue };
+                for (b, wall_b) in self.lines.iter().enumerate() {
+                    let Some(wall_b) = wall_b.as_ref().filter(|_| b != a) else { continue };
                     // Either side: the observed normal faces the sensor,
                     // which puts it on the side the point was seen from.
                     if (wall_b.normal.0 * m.0 + wall_b.normal.1 * m.1).abs() < min_cos {
                         continue;
                     }
-                    let Some(robot) = solve(&wall_a, turn(p), &wall_b, turn(q)) else { continue };
+                    let Some(robot) = solve(wall_a, turn(p), wall_b, turn(q)) else { continue };
                     let on = |line: &Line, v: (Real, Real)| line.covers((robot.0 + v.0, robot.1 + v.1));
-                    if !(on(&wall_a, turn(p)) && on(&wall_b, turn(q))) {
+                    if !(on(wall_a, turn(p)) && on(wall_b, turn(q))) {
                         continue;
                     }
                     found += 1;
@@ -254,7 +260,7 @@ impl CgrModel {
                     }
                 }
                 let robot = chosen?;
-                let sensor = self.sensor_at(robot, turn(obs.sensor));
+                let sensor = sensor_at(robot);
                 let seen = |v: (Real, Real)| sees(&self.map, sensor, (robot.0 + v.0, robot.1 + v.1));
                 if !(seen(turn(p)) && seen(turn(q))) {
                     return None;
@@ -267,7 +273,7 @@ impl CgrModel {
                 let on_wall = (w.a.0 + u * (w.b.0 - w.a.0), w.a.1 + u * (w.b.1 - w.a.1));
                 let v = turn(p);
                 let robot = (on_wall.0 - v.0, on_wall.1 - v.1);
-                if !sees(&self.map, self.sensor_at(robot, turn(obs.sensor)), on_wall) {
+                if !sees(&self.map, sensor_at(robot), on_wall) {
                     return None;
                 }
                 robot
@@ -275,12 +281,6 @@ impl CgrModel {
         };
         let pose = Pose2::new(robot.0, robot.1, theta);
         self.can_be_at(&pose).then_some(pose)
-    }
-
-    /// The sensor's place for a robot at `robot` whose sensor offset,
-    /// turned into the map frame, is `offset`.
-    fn sensor_at(&self, robot: (Real, Real), offset: (Real, Real)) -> (Real, Real) {
-        (robot.0 + offset.0, robot.1 + offset.1)
     }
 
     /// The walls visible from `pose`: the grid's cell if the pose is on the
@@ -318,15 +318,19 @@ fn point(obs: &Observation2d, i: usize) -> (Real, Real) {
     (Real::from(obs.points[i][0]), Real::from(obs.points[i][1]))
 }
 
+/// Normals within this angle of a point's, degrees, are of its surface.
+const SAME_SURFACE_DEG: Real = 30.0;
+
 /// The unit normal at point `i` averaged over the points near it whose
-/// normals agree within 30° (a local fit of its surface).
+/// normals agree within [`SAME_SURFACE_DEG`] (a local fit of its surface).
 fn local_normal(obs: &Observation2d, i: usize) -> (Real, Real) {
     let (p, n) = (obs.points[i], obs.normals[i]);
+    let min_cos = SAME_SURFACE_DEG.to_radians().cos();
     let (mut sx, mut sy) = (0.0, 0.0);
     for (q, m) in obs.points.iter().zip(&obs.normals) {
         let (dx, dy) = (Real::from(q[0] - p[0]), Real::from(q[1] - p[1]));
         let agree = Real::from(m[0] * n[0] + m[1] * n[1]);
-        if dx * dx + dy * dy <= NORMAL_RADIUS * NORMAL_RADIUS && agree >= 0.866 {
+        if dx * dx + dy * dy <= NORMAL_RADIUS * NORMAL_RADIUS && agree >= min_cos {
             (sx, sy) = (sx + Real::from(m[0]), sy + Real::from(m[1]));
         }
     }
@@ -336,6 +340,7 @@ fn local_normal(obs: &Observation2d, i: usize) -> (Real, Real) {
 
 /// A wall as an oriented line: unit direction and normal, its first end
 /// and its length.
+#[derive(Debug, Clone)]
 struct Line {
     a: (Real, Real),
     direction: (Real, Real),
