@@ -15,7 +15,7 @@ use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, Sp
 
 use crate::sim::office::Floor;
 use crate::sim::people::Crowd;
-use crate::sim::{DEFAULT_WORLD, SimConfig, SimEvent, Simulation, Start, floor_for};
+use crate::sim::{DEFAULT_WORLD, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for};
 use crate::{Error, Result};
 
 /// The `depth_sim` spout's params; a param left out takes its value from
@@ -39,6 +39,9 @@ struct P {
     /// Where the robot starts: `"first_node"` (the default) or `"drawn"`
     /// per seed ([`Start`]).
     start: Start,
+    /// A kidnapping, e.g. `{ at_secs = 10 }` (carried 5–20 m, drawn per
+    /// seed; [`Kidnap`]). The default is none.
+    kidnap: Option<Kidnap>,
 }
 
 impl Default for P {
@@ -51,6 +54,7 @@ impl Default for P {
             people: 5,
             seed: None,
             start: Start::default(),
+            kidnap: None,
         }
     }
 }
@@ -133,6 +137,7 @@ impl Spout for DepthSimSpout {
             range_max: 8.0,
             beams: 2,
             start: self.p.start,
+            kidnap: self.p.kidnap,
             ..SimConfig::default()
         };
         config.check()?;

@@ -60,6 +60,18 @@ pub enum Error {
         /// Probability of no return: must be in [0, 1].
         dropout: Real,
     },
+    /// A kidnapping outside the run or with an impossible carry.
+    #[error(
+        "a kidnapping needs 0 ≤ at_secs < the duration and 0 ≤ min_m ≤ max_m, got at_secs {at_secs}, min_m {min_m}, max_m {max_m}"
+    )]
+    Kidnap {
+        /// When, seconds.
+        at_secs: Real,
+        /// The shortest carry, metres.
+        min_m: Real,
+        /// The longest carry, metres.
+        max_m: Real,
+    },
     /// The scan rate or the robot's top speeds are not positive.
     #[error("scan rate, speed and turn rate must be > 0")]
     Motion {

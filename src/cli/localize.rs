@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use squall_core::eval::map_frame;
+use squall_core::geometry::Pose2;
 use squall_core::trajectory::Trajectory;
 
-use squall_spouts::sim::{SimConfig, SimEvent, Simulation, Start, floor_for};
+use squall_spouts::sim::{Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for};
 use squall_topology::{Override, TopologySpec};
 
 use super::eval::print_map_frame;
@@ -51,6 +52,12 @@ pub(super) struct LocalizeArgs {
     /// seed's start).
     #[arg(long, value_name = "drawn|first-node", default_value = "drawn")]
     start: String,
+    /// Kidnap the simulated robot this many seconds in: it is carried to
+    /// a place of the map 5–20 m away (drawn per seed) without its
+    /// odometry noticing. metrics.json then says how long the localizer
+    /// took to find it again.
+    #[arg(long, value_name = "SECS")]
+    kidnap_at: Option<f64>,
     /// Run seed (the simulated robot's start, route and noise, and the
     /// filter).
     #[arg(long, default_value_t = 42)]
@@ -76,7 +83,9 @@ fn quoted(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
 }
 
-fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
+/// The built-in topology's overrides for `args`, and the simulated
+/// route they drive.
+fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
     if !args.sim {
         return Err("--sim is required: recorded depth and laser input come later".into());
     }
@@ -104,17 +113,24 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         Start::Drawn => "drawn",
         Start::FirstNode => "first_node",
     };
+    let kidnap = match args.kidnap_at {
+        Some(at) => format!(", kidnap = {{ at_secs = {at} }}"),
+        None => String::new(),
+    };
     let mut sets = vec![format!("topology.seed={}", args.seed)];
     match args.input.as_str() {
         "laser" => {
-            sets.push(format!("source.params.world={}", quoted(&map)));
-            sets.push(format!("source.params.duration_secs={}", args.duration));
-            sets.push(format!("source.params.start=\"{start_name}\""));
+            sets.push(format!(
+                "source.params={{ world = {}, duration_secs = {}, range_max = {}, start = \"{start_name}\"{kidnap} }}",
+                quoted(&map),
+                args.duration,
+                RANGE_MAX
+            ));
         }
         "depth" => {
             sets.push("source.kind=\"depth_sim\"".into());
             sets.push(format!(
-                "source.params={{ world = {}, duration_secs = {}, start = \"{start_name}\" }}",
+                "source.params={{ world = {}, duration_secs = {}, start = \"{start_name}\"{kidnap} }}",
                 quoted(&map),
                 args.duration
             ));
@@ -129,6 +145,7 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         format!("matcher.params.map={}", quoted(&map)),
         format!("matcher.params.resampling={}", quoted(scheme)),
     ]);
+    let route = simulated_route(&map, start, args)?;
     match args.init.as_str() {
         "global" => {
             let particles = args.particles.unwrap_or(GLOBAL_PARTICLES);
@@ -137,7 +154,7 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
             sets.push(format!("matcher.params.min_particles={}", particles.min(TRACKING_PARTICLES)));
         }
         "known" => {
-            let at = first_true_pose(&map, start, args)?;
+            let at = (route.start.x, route.start.y, route.start.theta);
             let particles = args.particles.unwrap_or(TRACKING_PARTICLES);
             sets.push(format!("matcher.params.particles={particles}"));
             sets.push(format!("matcher.params.min_particles={particles}"));
@@ -152,33 +169,70 @@ fn overrides(args: &LocalizeArgs) -> Result<Vec<Override>, String> {
         .collect::<Result<_, squall_topology::OverrideError>>()
         .map_err(|e| e.to_string())?;
     out.extend(args.overrides.iter().cloned());
-    Ok(out)
+    Ok((out, route))
 }
 
-/// Where the simulated robot starts from `start` (the simulator is
-/// deterministic per seed: this is the pose of its first scan).
-fn first_true_pose(map: &str, start: Start, args: &LocalizeArgs) -> Result<(f64, f64, f64), String> {
+/// The simulated laser's range, metres (the topology's `points` bolt
+/// reads as far).
+const RANGE_MAX: f64 = 8.0;
+
+/// What the run's simulated robot will do, known before it starts (the
+/// simulator is deterministic per seed).
+struct Route {
+    /// The true pose of the first scan or frame.
+    start: Pose2,
+    /// The kidnapping, when one was asked for.
+    carry: Option<Carry>,
+}
+
+/// Replays the run's simulated route (the robot's motion alone, the
+/// sensor's rays left out) for its start and its kidnapping. An error if
+/// the settings are out of range or no place of the map lies 5–20 m from
+/// where the robot is to be kidnapped.
+fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route, String> {
     let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
+    let kidnap = args.kidnap_at.map(|at_secs| Kidnap {
+        at_secs,
+        min_m: Kidnap::DEFAULT_MIN_M,
+        max_m: Kidnap::DEFAULT_MAX_M,
+    });
     let config = SimConfig {
         seed: args.seed,
         duration_secs: args.duration,
-        range_max: 8.0,
+        range_max: RANGE_MAX,
+        beams: 2,
         start,
+        kidnap,
         ..SimConfig::default()
     };
-    // `new` checks the config first, as `config.check()` did here.
-    Simulation::new(floor, config)
-        .map_err(|e| e.to_string())?
-        .find_map(|e| match e {
-            SimEvent::Scan(_, truth) => Some((truth.x, truth.y, truth.theta)),
-            SimEvent::Odom(_) => None,
-        })
-        .ok_or_else(|| "the simulation produced no scan".to_string())
+    // `new` checks the config first.
+    let mut sim = Simulation::new(floor, config).map_err(|e| format!("--kidnap-at: {e}"))?;
+    let first = sim.by_ref().find_map(|e| match e {
+        SimEvent::Scan(_, truth) => Some(truth),
+        SimEvent::Odom(_) => None,
+    });
+    let start = first.ok_or("the simulation produced no scan")?;
+    if kidnap.is_some() {
+        sim.by_ref().for_each(drop);
+    }
+    let carry = sim.carried();
+    if let (Some(k), Some(c)) = (kidnap, carry)
+        && !(k.min_m..=k.max_m).contains(&c.distance())
+    {
+        return Err(format!(
+            "{map}: no place of the roadmap lies {}–{} m from where the robot is at {} s (the nearest draw was {:.1} m away)",
+            k.min_m,
+            k.max_m,
+            k.at_secs,
+            c.distance()
+        ));
+    }
+    Ok(Route { start, carry })
 }
 
 /// Runs `squall localize`.
 pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
-    let overrides = match overrides(args) {
+    let (overrides, route) = match overrides(args) {
         Ok(o) => o,
         Err(e) => {
             eprintln!("error: {e}");
@@ -186,20 +240,36 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
         }
     };
     let spec = TopologySpec::parse_with("localize.toml (built in)", LOCALIZE_TOML, &overrides);
+    let carry = route.carry;
+    let scorer = |dir: &Path| score(dir, carry);
     match report_invalid(spec) {
-        Ok(topology) => run::run_scored(&topology, Some(args.out.clone()), false, None, Some(&score)),
+        Ok(topology) => run::run_scored(&topology, Some(args.out.clone()), false, None, Some(&scorer)),
         Err(code) => code,
     }
 }
 
 /// The run's trajectory against the simulator's ground truth, in the map
 /// frame (a localizer's poses are in the map's frame: no alignment),
-/// printed and returned for metrics.json under `localization`.
-fn score(dir: &Path) -> Result<(&'static str, serde_json::Value), String> {
+/// printed and returned for metrics.json under `localization`; with a
+/// kidnapping, also how long the robot was lost after it (`kidnap`).
+fn score(dir: &Path, carry: Option<Carry>) -> Result<(&'static str, serde_json::Value), String> {
     let read = |name: &str| Trajectory::read_tum(&dir.join(name)).map_err(|e| e.to_string());
     let (estimate, truth) = (read("trajectory.tum")?, read("ground_truth.tum")?);
     let score = map_frame::score(&estimate, &truth)
         .ok_or("no pose of trajectory.tum shares a stamp with ground_truth.tum")?;
     print_map_frame(&score, false);
-    Ok(("localization", serde_json::to_value(score).map_err(|e| e.to_string())?))
+    let mut value = serde_json::to_value(score).map_err(|e| e.to_string())?;
+    if let Some(c) = carry {
+        let recovered = map_frame::recovered_after(&estimate, &truth, c.stamp);
+        match recovered {
+            Some(t) => println!("  kidnapped at {:.1} s, carried {:.1} m: found again {t:.2} s later", c.stamp, c.distance()),
+            None => println!("  kidnapped at {:.1} s, carried {:.1} m: not found again", c.stamp, c.distance()),
+        }
+        value["kidnap"] = serde_json::json!({
+            "at_s": c.stamp,
+            "carry_m": c.distance(),
+            "recovered_after_s": recovered,
+        });
+    }
+    Ok(("localization", value))
 }

@@ -75,6 +75,21 @@ pub fn score(estimate: &Trajectory, truth: &Trajectory) -> Option<MapFrameScore>
     })
 }
 
+/// Seconds from `since` to the first pose after which every pose of
+/// `estimate` is within [`WITHIN_M`] and [`WITHIN_DEG`] of `truth` (to the
+/// first pose after `since` when every one is); `None` if
+/// the last pose is not within them or no pose comes after `since`. How
+/// fast a kidnapped robot is found again: `since` is the kidnapping.
+pub fn recovered_after(estimate: &Trajectory, truth: &Trajectory, since: f64) -> Option<f64> {
+    let pairs: Vec<_> = super::common_stamps(estimate, truth).into_iter().filter(|p| p.0 > since).collect();
+    let (_, last, last_truth) = pairs.last()?;
+    if !is_within(last, last_truth) {
+        return None;
+    }
+    let settled = pairs.iter().rposition(|(_, p, g)| !is_within(p, g)).map_or(0, |i| i + 1);
+    Some(pairs[settled].0 - since)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,6 +112,22 @@ mod tests {
             t.push(*s, Pose2::new(p.x + o.x, p.y + o.y, p.theta + o.theta));
         }
         t
+    }
+
+    #[test]
+    fn recovery_counts_from_the_kidnapping_to_the_last_pose_off() {
+        let truth = walk();
+        // Off by 3 m for the poses at 4.0–5.8 s, then within.
+        let lost = moved(&truth, |i| Pose2::new(if (20..30).contains(&i) { 3.0 } else { 0.0 }, 0.0, 0.0));
+        let after = recovered_after(&lost, &truth, 3.9).unwrap();
+        assert!((after - 2.1).abs() < 1e-9, "{after}");
+        // Nothing off after the instant: recovered at the first pose.
+        let at_once = recovered_after(&lost, &truth, 5.9).unwrap();
+        assert!((at_once - 0.1).abs() < 1e-9, "{at_once}");
+        // Off at the end: not recovered.
+        let stays = moved(&truth, |i| Pose2::new(if i >= 20 { 3.0 } else { 0.0 }, 0.0, 0.0));
+        assert_eq!(recovered_after(&stays, &truth, 3.9), None);
+        assert_eq!(recovered_after(&truth, &truth, 100.0), None, "no pose after the instant");
     }
 
     #[test]

@@ -9,7 +9,7 @@ pub mod roadmap;
 pub mod robot;
 mod spout;
 
-pub use robot::{OdometryQuality, SimConfig, SimEvent, Simulation, Start};
+pub use robot::{Carry, Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 pub use spout::SimSpout;
 
 use crate::{Error, Result};

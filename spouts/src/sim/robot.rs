@@ -44,7 +44,67 @@ pub struct SimConfig {
     pub odometry: OdometryQuality,
     /// Where the robot starts. The default is [`Start::FirstNode`].
     pub start: Start,
+    /// Whether, and when, the robot is carried elsewhere without its
+    /// odometry noticing. The default is never.
+    pub kidnap: Option<Kidnap>,
 }
+
+/// A kidnapping: at `at_secs` the robot is lifted and set down at a place
+/// of the roadmap drawn per seed, between `min_m` and `max_m` (straight
+/// line) from where it stood, facing along its corridor. The odometry
+/// goes on from where it was, as if nothing had happened: what a
+/// localizer must notice and recover from.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Kidnap {
+    /// When, seconds from the start.
+    pub at_secs: Real,
+    /// The shortest carry, metres.
+    #[serde(default = "Kidnap::default_min_m")]
+    pub min_m: Real,
+    /// The longest carry, metres.
+    #[serde(default = "Kidnap::default_max_m")]
+    pub max_m: Real,
+}
+
+impl Kidnap {
+    /// The shortest carry unless told otherwise: past what tracking can
+    /// bridge, metres.
+    pub const DEFAULT_MIN_M: Real = 5.0;
+    /// The longest carry unless told otherwise, metres.
+    pub const DEFAULT_MAX_M: Real = 20.0;
+
+    fn default_min_m() -> Real {
+        Self::DEFAULT_MIN_M
+    }
+
+    fn default_max_m() -> Real {
+        Self::DEFAULT_MAX_M
+    }
+}
+
+/// Where and when a kidnapping carried the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Carry {
+    /// The instant, seconds: the scans after it see the new place.
+    pub stamp: Real,
+    /// Where the robot was lifted.
+    pub from: Pose2,
+    /// Where it was set down.
+    pub to: Pose2,
+}
+
+impl Carry {
+    /// The carry's straight-line length, metres.
+    pub fn distance(&self) -> Real {
+        self.from.distance(&self.to)
+    }
+}
+
+/// Places drawn for a kidnapping before the one nearest to the asked
+/// distances is taken: on a floor that has places that far apart, one is
+/// found within a few dozen draws.
+const KIDNAP_DRAWS: usize = 10_000;
 
 /// Where a simulated robot starts.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
@@ -144,6 +204,7 @@ impl Default for SimConfig {
             max_turn: 0.8,
             odometry: OdometryQuality::default(),
             start: Start::default(),
+            kidnap: None,
         }
     }
 }
@@ -169,6 +230,13 @@ impl SimConfig {
         if !positive(self.scan_hz) || !positive(self.max_speed) || !positive(self.max_turn) {
             let (scan_hz, max_speed, max_turn) = (self.scan_hz, self.max_speed, self.max_turn);
             return Err(Error::Motion { scan_hz, max_speed, max_turn });
+        }
+        if let Some(k) = self.kidnap {
+            let at_ok = k.at_secs.is_finite() && k.at_secs >= 0.0 && k.at_secs < self.duration_secs;
+            let carry_ok = k.min_m.is_finite() && k.max_m.is_finite() && 0.0 <= k.min_m && k.min_m <= k.max_m;
+            if !(at_ok && carry_ok) {
+                return Err(Error::Kidnap { at_secs: k.at_secs, min_m: k.min_m, max_m: k.max_m });
+            }
         }
         Ok(())
     }
@@ -211,6 +279,8 @@ pub struct Simulation {
     /// The odometry's errors.
     errors: OdometryErrors,
     pending: Option<SimEvent>,
+    /// The kidnapping, once it happened.
+    carried: Option<Carry>,
 }
 
 /// A start on `floor`'s roadmap: (pose, the node it comes from, the node it
@@ -283,12 +353,44 @@ impl Simulation {
             heading_bias,
             errors,
             pending: None,
+            carried: None,
         })
     }
 
     /// The floor being simulated.
     pub fn floor(&self) -> &Floor {
         &self.floor
+    }
+
+    /// Where and when the robot was kidnapped, once it has been.
+    pub fn carried(&self) -> Option<Carry> {
+        self.carried
+    }
+
+    /// Carries the robot as `kidnap` says: the first drawn place of the
+    /// roadmap whose distance from here lies within the asked range, else
+    /// (after [`KIDNAP_DRAWS`] draws) the draw nearest to it. The route
+    /// goes on from the new place's corridor; the odometry does not move.
+    fn kidnap(&mut self, kidnap: Kidnap) {
+        let mut rng = stream_for_purpose(self.config.seed, "kidnap");
+        let outside = |d: Real| (kidnap.min_m - d).max(d - kidnap.max_m).max(0.0);
+        let mut best: Option<(Real, (Pose2, usize, usize))> = None;
+        for _ in 0..KIDNAP_DRAWS {
+            let place = drawn_start(&self.floor, &mut rng);
+            let miss = outside(place.0.distance(&self.truth));
+            if best.as_ref().is_none_or(|(m, _)| miss < *m) {
+                best = Some((miss, place));
+            }
+            if miss == 0.0 {
+                break;
+            }
+        }
+        let Some((_, (to, from_node, to_node))) = best else { return };
+        self.carried = Some(Carry { stamp: self.stamp(), from: self.truth, to });
+        self.truth = to;
+        self.previous = from_node;
+        self.target = to_node;
+        self.plan.clear();
     }
 
     fn stamp(&self) -> Real {
@@ -452,6 +554,12 @@ impl Iterator for Simulation {
             return Some(e);
         }
         while self.step < self.steps {
+            if let Some(k) = self.config.kidnap
+                && self.carried.is_none()
+                && self.stamp() >= k.at_secs
+            {
+                self.kidnap(k);
+            }
             self.advance();
             if self.step % self.steps_per_scan == 0 {
                 let scan = self.scan();
@@ -523,6 +631,41 @@ mod tests {
             let far = drawn.iter().filter(|q| q.distance(p) > 2.0).count();
             assert!(far >= 15, "seed {}: starts spread over the floor, {far} of 20 farther than 2 m", i + 1);
         }
+    }
+
+    #[test]
+    fn a_kidnapping_carries_the_robot_the_drawn_distance_and_the_odometry_does_not_notice() {
+        let floor = office(1, 3, 2);
+        let kidnap = Kidnap { at_secs: 5.0, min_m: 5.0, max_m: 20.0 };
+        let mut carries = Vec::new();
+        for seed in 1..=10 {
+            let config = SimConfig { seed, duration_secs: 8.0, kidnap: Some(kidnap), ..SimConfig::default() };
+            let mut sim = Simulation::new(floor.clone(), config).unwrap();
+            let scans: Vec<(Real, Pose2, Pose2)> = sim
+                .by_ref()
+                .filter_map(|e| match e {
+                    SimEvent::Scan(s, truth) => Some((s.stamp, s.odometry, truth)),
+                    SimEvent::Odom(_) => None,
+                })
+                .collect();
+            let carry = sim.carried().expect("kidnapped");
+            assert!((5.0..=20.0).contains(&carry.distance()), "seed {seed}: {carry:?}");
+            assert!((5.0..5.1).contains(&carry.stamp), "seed {seed}: at {}", carry.stamp);
+            // Between the scans around the instant, the truth jumps by the
+            // carry and the odometry moves by one scan's drive.
+            let i = scans.iter().position(|s| s.0 > carry.stamp).unwrap();
+            let (before, after) = (&scans[i - 1], &scans[i]);
+            assert!(before.2.distance(&after.2) > carry.distance() - 0.2, "seed {seed}");
+            assert!(before.1.distance(&after.1) < 0.1, "seed {seed}: the odometry jumped");
+            // The new place is on the roadmap's corridors.
+            assert!(floor.nodes.iter().any(|n| (n.0 - carry.to.x).hypot(n.1 - carry.to.y) < 10.0));
+            carries.push(carry.to);
+        }
+        assert!(carries.windows(2).all(|w| w[0] != w[1]), "each seed its own carry");
+        let bad = SimConfig { duration_secs: 4.0, kidnap: Some(kidnap), ..SimConfig::default() };
+        assert!(bad.check().unwrap_err().to_string().starts_with("a kidnapping needs 0 ≤ at_secs < the duration"));
+        let backwards = Kidnap { min_m: 9.0, max_m: 3.0, ..kidnap };
+        assert!(SimConfig { kidnap: Some(backwards), ..SimConfig::default() }.check().is_err());
     }
 
     #[test]

@@ -6,7 +6,7 @@ use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
-use super::robot::{OdometryQuality, SimConfig, SimEvent, Simulation, Start};
+use super::robot::{Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 use super::{DEFAULT_WORLD, laser_range_for, top_speed_for};
 
 /// The `sim` spout's params; a param left out takes its value from
@@ -36,6 +36,9 @@ struct P {
     /// Where the robot starts: `"first_node"` (the default) or `"drawn"`
     /// per seed ([`Start`]).
     start: Start,
+    /// A kidnapping, e.g. `{ at_secs = 10 }` (carried 5–20 m, drawn per
+    /// seed; [`Kidnap`]). The default is none.
+    kidnap: Option<Kidnap>,
 }
 
 impl Default for P {
@@ -50,6 +53,7 @@ impl Default for P {
             max_scans: None,
             odometry: OdometryQuality::default(),
             start: Start::default(),
+            kidnap: None,
         }
     }
 }
@@ -77,6 +81,7 @@ impl SimSpout {
             max_speed: top_speed_for(&params.world),
             odometry: params.odometry,
             start: params.start,
+            kidnap: params.kidnap,
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
