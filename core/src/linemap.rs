@@ -63,11 +63,22 @@ impl LineMap {
         hit.then_some(best)
     }
 
+    /// Whether the ray from `origin` in direction `angle` meets a wall
+    /// within `max_range`: `cast(..).is_some()`, stopping at the first wall
+    /// met rather than looking for the nearest.
+    pub fn blocked(&self, origin: (Real, Real), angle: Real, max_range: Real) -> bool {
+        let dir = (angle.cos(), angle.sin());
+        self.walls.iter().any(|w| {
+            ray_line(origin, dir, w.a, w.b)
+                .is_some_and(|(t, u)| t > 1e-9 && t < max_range && (0.0..=1.0).contains(&u))
+        })
+    }
+
     /// Whether the straight path from `a` to `b` crosses no wall.
     pub fn clear(&self, a: (Real, Real), b: (Real, Real)) -> bool {
         let (dx, dy) = (b.0 - a.0, b.1 - a.1);
         let length = dx.hypot(dy);
-        length == 0.0 || self.cast(a, dy.atan2(dx), length).is_none()
+        length == 0.0 || !self.blocked(a, dy.atan2(dx), length)
     }
 
     /// Bounding box (min x, min y, max x, max y).
@@ -104,6 +115,21 @@ mod tests {
         assert_eq!(w.cast((2.0, 2.0), 0.0, 1.5), None, "beyond max range");
         assert!(w.clear((1.0, 1.5), (3.0, 3.0)));
         assert!(!w.clear((1.0, 1.0), (5.0, 1.0)));
+    }
+
+    #[test]
+    fn a_ray_is_blocked_exactly_when_a_cast_hits() {
+        let w = square();
+        for i in 0..40 {
+            for k in 0..24 {
+                let origin = (-1.0 + 0.15 * i as Real, 0.5 + 0.1 * i as Real);
+                let angle = k as Real * std::f64::consts::PI / 12.0;
+                for reach in [0.5, 2.0, 10.0] {
+                    let cast = w.cast(origin, angle, reach).is_some();
+                    assert_eq!(w.blocked(origin, angle, reach), cast, "{origin:?} {angle} {reach}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -18,17 +18,39 @@ fn point_segment(p: (Real, Real), a: (Real, Real), b: (Real, Real)) -> Real {
     (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
 }
 
-fn clearance(world: &LineMap, p: (Real, Real)) -> Real {
-    world.walls.iter().map(|w| point_segment(p, w.a, w.b)).fold(Real::MAX, Real::min)
+/// Whether every wall is at least `margin` from `p`. A wall whose
+/// bounding box lies farther than `margin` in x or y is passed over
+/// without measuring: on a building's map nearly all of them.
+fn clear_by(world: &LineMap, p: (Real, Real), margin: Real) -> bool {
+    world.walls.iter().all(|w| {
+        let beyond = |v: Real, a: Real, b: Real| (a.min(b) - v).max(v - a.max(b));
+        beyond(p.0, w.a.0, w.b.0) > margin
+            || beyond(p.1, w.a.1, w.b.1) > margin
+            || point_segment(p, w.a, w.b) >= margin
+    })
 }
+
+/// Rays cast round a point to tell whether walls surround it...
+const RAYS: usize = 16;
+/// ...and how many must hit a wall.
+const RAYS_HIT: usize = 13;
 
 /// Whether walls surround `p`: at least 13 of 16 rays hit one. Points
 /// outside a building see open space over half the circle or more; points
 /// inside may look out through a few gaps (doors, holes in the map).
+/// Stops casting once the answer is known.
 fn enclosed(world: &LineMap, p: (Real, Real), reach: Real) -> bool {
-    let hits =
-        (0..16).filter(|&k| world.cast(p, k as Real * std::f64::consts::PI / 8.0, reach).is_some()).count();
-    hits >= 13
+    let (mut hits, mut misses) = (0, 0);
+    for k in 0..RAYS {
+        match world.blocked(p, k as Real * std::f64::consts::PI / (RAYS / 2) as Real, reach) {
+            true => hits += 1,
+            false => misses += 1,
+        }
+        if hits >= RAYS_HIT || misses > RAYS - RAYS_HIT {
+            break;
+        }
+    }
+    hits >= RAYS_HIT
 }
 
 /// Why a map has no roadmap.
@@ -74,7 +96,7 @@ pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, Roa
     for j in 0..ny {
         for i in 0..nx {
             let p = (x0 + i as Real * spacing, y0 + j as Real * spacing);
-            if clearance(&world, p) >= margin && enclosed(&world, p, reach) {
+            if clear_by(&world, p, margin) && enclosed(&world, p, reach) {
                 id[j * nx + i] = nodes.len();
                 nodes.push(p);
             }
@@ -97,7 +119,7 @@ pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, Roa
                     continue;
                 }
                 let mid = ((nodes[a].0 + nodes[b].0) / 2.0, (nodes[a].1 + nodes[b].1) / 2.0);
-                if world.clear(nodes[a], nodes[b]) && clearance(&world, mid) >= margin {
+                if clear_by(&world, mid, margin) && world.clear(nodes[a], nodes[b]) {
                     adjacency[a].push(b);
                     adjacency[b].push(a);
                 }
