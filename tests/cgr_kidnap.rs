@@ -1,6 +1,8 @@
 //! Recovery from kidnapping: the robot, tracked well on a building's line
 //! map, is carried elsewhere without its odometry noticing; with
-//! augmented MCL the filter must find it again within a bounded time.
+//! augmented MCL and a set KLD-sampling sizes (50 to 2000 particles, as
+//! `squall localize` runs the laser), the filter must find it again
+//! within a bounded time.
 
 use std::sync::Arc;
 
@@ -19,8 +21,8 @@ const SCAN_HZ: f64 = 10.0;
 /// tracked from the true start, kidnapped at `at` seconds to where the
 /// robot is `skip` seconds later (odometry shows no motion over the jump).
 /// Returns (kidnap distance m, position error per scan after the
-/// kidnapping).
-fn kidnapped(world: &str, at: f64, skip: f64, particles: usize) -> (f64, Vec<f64>) {
+/// kidnapping, the most particles the set held after it).
+fn kidnapped(world: &str, at: f64, skip: f64) -> (f64, Vec<f64>, usize) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/linemaps").join(world);
     assert!(path.exists(), "missing {}: this test reads the shared data set", path.display());
     let floor = floor_for(path.to_str().unwrap(), 4).unwrap();
@@ -46,33 +48,35 @@ fn kidnapped(world: &str, at: f64, skip: f64, particles: usize) -> (f64, Vec<f64
         }))
         .collect();
     let options = LocalizeOptions {
-        particles,
-        min_particles: particles,
+        particles: 2000,
+        min_particles: 50,
         init: Init::Known(events[0].1),
-        injection: Some(Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1 }),
+        injection: Some(Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1, lost_share: 0.5 }),
         ..LocalizeOptions::default()
     };
     let grid = Arc::new(SceneGrid::build(&map, 0.2, 8.0, 2).unwrap());
     let mut filter = Filter::new(CgrModel::new(map, Some(grid), options).unwrap(), 11, 1).unwrap();
-    let mut errors = Vec::new();
+    let (mut errors, mut most) = (Vec::new(), 0);
     for (i, (obs, truth)) in carried.iter().enumerate() {
         filter.process(obs);
         if i >= k {
+            most = most.max(filter.population().map_or(0, |p| p.len()));
             errors.push(filter.estimate(&obs.odometry).unwrap().distance(truth));
         }
     }
-    (events[k].1.distance(&events[j].1), errors)
+    (events[k].1.distance(&events[j].1), errors, most)
 }
 
 #[test]
 fn a_kidnapped_robot_is_found_again() {
     // CVAP7 with the simulated laser: tracked for 20 s, then carried to
     // where the robot is 15 s later, 40 s more.
-    let (distance, errors) = kidnapped("CVAP7_vector.txt", 20.0, 15.0, 300);
+    let (distance, errors, most) = kidnapped("CVAP7_vector.txt", 20.0, 15.0);
     let line: Vec<String> = errors.iter().step_by(10).map(|e| format!("{e:.2}")).collect();
     eprintln!("carried {distance:.1} m; error each second after: {}", line.join(" "));
     assert!(distance > 5.0, "the kidnapping moves the robot ({distance:.1} m)");
     assert!(errors[0] > 5.0, "the filter is lost at first ({:.2} m)", errors[0]);
+    assert!(most >= 1000, "a lost robot searches with at least half the most particles ({most})");
     let found = errors.iter().position(|&e| e < 0.2).map(|i| i as f64 / SCAN_HZ).expect("found again");
     assert!(found < 5.0, "found after {found} s");
     // Kept from then on: a look-alike place may win for a moment when the

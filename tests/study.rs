@@ -272,3 +272,55 @@ fn simulated_worlds_are_studied_per_odometry_quality_with_their_relations() {
     assert!(text(&out.stderr).contains("--sim-worlds nowhere.txt"), "{}", text(&out.stderr));
     assert!(!dir.path().join("E").exists());
 }
+
+#[test]
+fn a_localization_study_scores_every_map_mode_and_seed_and_refuses_a_kidnap_after_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let map = map.to_str().unwrap();
+    let args = ["study", "--maps", map, "--seeds", "1", "--duration", "12", "--jobs", "2", "--out", "L"];
+    let out = squall(dir.path(), &args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let md = text(&out.stdout);
+    for mode in ["tracking", "global", "kidnap"] {
+        assert!(md.contains(&format!("| CVAP7 | laser | {mode} | 1/1 |")), "{mode}:\n{md}");
+    }
+    let csv = std::fs::read_to_string(dir.path().join("L/study.csv")).unwrap();
+    let rows = csv_rows(&csv);
+    let column = |name: &str| rows[0].iter().position(|c| c == name).unwrap();
+    assert_eq!(rows.len(), 4, "a header and one row per mode: {csv}");
+    let (mode, success, carry, recovered, converged) = (
+        column("mode"),
+        column("success"),
+        column("carry_m"),
+        column("recovered_after_s"),
+        column("converged_after_s"),
+    );
+    for row in &rows[1..] {
+        assert_eq!(row[success], "true", "{row:?}");
+        match row[mode].as_str() {
+            "tracking" => assert_eq!(row[converged].parse::<f64>().unwrap(), 0.0, "{row:?}"),
+            "global" => assert!(row[converged].parse::<f64>().unwrap() <= 10.0, "{row:?}"),
+            "kidnap" => {
+                // Carried as far as the study says, and found within 5 s.
+                let c: f64 = row[carry].parse().unwrap();
+                assert!((5.0..=20.0).contains(&c), "{row:?}");
+                assert!(row[recovered].parse::<f64>().unwrap() <= 5.0, "{row:?}");
+            }
+            other => panic!("unexpected mode {other}"),
+        }
+        let run = dir.path().join(format!("L/runs/CVAP7-laser-{}-s1/metrics.json", row[mode]));
+        assert!(run.is_file(), "{}", run.display());
+    }
+
+    // A kidnapping after the run's end, or a map that is not there, stops
+    // the study before anything runs.
+    let late = ["study", "--maps", map, "--seeds", "1", "--duration", "5", "--kidnap-at", "8", "--out", "M"];
+    let out = squall(dir.path(), &late);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--kidnap-at must lie within the run"), "{}", text(&out.stderr));
+    let out = squall(dir.path(), &["study", "--maps", "nowhere.txt", "--seeds", "1", "--out", "N"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("nowhere.txt"), "{}", text(&out.stderr));
+    assert!(!dir.path().join("M").exists() && !dir.path().join("N").exists());
+}

@@ -32,9 +32,10 @@ pub(super) struct LocalizeArgs {
     /// plane filtered by FSPF).
     #[arg(long, value_name = "laser|depth", default_value = "laser")]
     input: String,
-    /// Particles at the start. A global start begins with this many
-    /// (default 2000) and keeps fewer as they gather (KLD-sampling), down
-    /// to 50; a known start keeps this many (default 50).
+    /// The most particles. A global start begins with this many (default
+    /// 2000) and keeps fewer as they gather (KLD-sampling), down to 50; a
+    /// known start begins with 50 and grows towards 2000 only when the
+    /// robot is lost. Given, a known start keeps exactly this many.
     #[arg(long)]
     particles: Option<usize>,
     /// Matcher tasks (the results do not depend on it).
@@ -146,6 +147,15 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
         format!("matcher.params.resampling={}", quoted(scheme)),
     ]);
     let route = simulated_route(&map, start, args)?;
+    // Augmented MCL (in localize.toml) redraws particles where one
+    // reading fits: a laser scan narrows that to a few places, a depth
+    // frame's 55° view of the walls within 3.5 m to too many, and the
+    // redrawn particles then pull a well-tracked robot to look-alike
+    // places (docs/decisions/0019-kidnapping-recovery.md). Off for depth.
+    let laser = args.input == "laser";
+    if !laser {
+        sets.push("matcher.params.injection=false".into());
+    }
     match args.init.as_str() {
         "global" => {
             let particles = args.particles.unwrap_or(GLOBAL_PARTICLES);
@@ -155,9 +165,16 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
         }
         "known" => {
             let at = (route.start.x, route.start.y, route.start.theta);
-            let particles = args.particles.unwrap_or(TRACKING_PARTICLES);
-            sets.push(format!("matcher.params.particles={particles}"));
-            sets.push(format!("matcher.params.min_particles={particles}"));
+            // Tracking keeps 50; a lost (kidnapped) robot may grow its
+            // set back to a global start's size to search, where
+            // injection is on.
+            let (most, fewest) = match args.particles {
+                Some(n) => (n, n),
+                None if laser => (GLOBAL_PARTICLES, TRACKING_PARTICLES),
+                None => (TRACKING_PARTICLES, TRACKING_PARTICLES),
+            };
+            sets.push(format!("matcher.params.particles={most}"));
+            sets.push(format!("matcher.params.min_particles={fewest}"));
             sets.push("matcher.params.init=\"known\"".into());
             sets.push(format!("matcher.params.start=[{}, {}, {}]", at.0, at.1, at.2));
         }
@@ -262,8 +279,14 @@ fn score(dir: &Path, carry: Option<Carry>) -> Result<(&'static str, serde_json::
     if let Some(c) = carry {
         let recovered = map_frame::recovered_after(&estimate, &truth, c.stamp);
         match recovered {
-            Some(t) => println!("  kidnapped at {:.1} s, carried {:.1} m: found again {t:.2} s later", c.stamp, c.distance()),
-            None => println!("  kidnapped at {:.1} s, carried {:.1} m: not found again", c.stamp, c.distance()),
+            Some(t) => println!(
+                "  kidnapped at {:.1} s, carried {:.1} m: found again {t:.2} s later",
+                c.stamp,
+                c.distance()
+            ),
+            None => {
+                println!("  kidnapped at {:.1} s, carried {:.1} m: not found again", c.stamp, c.distance())
+            }
         }
         value["kidnap"] = serde_json::json!({
             "at_s": c.stamp,

@@ -21,15 +21,32 @@ pub(crate) struct DepthPoints {
     planes: PlaneFiltered,
 }
 
+/// `cgr.fspf`'s params; a param left out takes FSPF's default.
+#[derive(Debug, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct P {
+    /// n_max: plane points to extract per frame. The default is 2000.
+    max_points: usize,
+}
+
+impl Default for P {
+    fn default() -> Self {
+        P { max_points: FspfOptions::default().max_points }
+    }
+}
+
 impl DepthPoints {
-    /// Builds it (params: none yet; the seed is the topology's).
+    /// Builds it (the camera is the `depth_sim` spout's D435; the seed is
+    /// the topology's).
     pub(crate) fn from_params(p: &Params) -> Result<Self, ParamError> {
-        if !p.table().is_empty() {
-            return Err(ParamError::new("cgr.fspf takes no params yet (the D435 on the depth_sim robot)"));
+        let params: P = p.parse()?;
+        if params.max_points == 0 {
+            return Err(ParamError::new("max_points must be at least 1"));
         }
         let camera = DepthCamera::d435_on_robot();
+        let options = FspfOptions { max_points: params.max_points, ..FspfOptions::default() };
         Ok(DepthPoints {
-            filter: PlaneFilter::new(FspfOptions::default(), camera.intrinsics),
+            filter: PlaneFilter::new(options, camera.intrinsics),
             mount: camera.mount,
             rng: ChaCha8Rng::seed_from_u64(p.seed() ^ 0xf5bf),
             planes: PlaneFiltered::default(),

@@ -72,12 +72,13 @@ struct CgrParams {
     refine_iterations: u32,
     outlier_sigmas: Real,
     /// Augmented MCL (random particles when observations stop fitting):
-    /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`
-    /// and `min_drop`.
+    /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`,
+    /// `min_drop` and `lost_share`.
     injection: bool,
     alpha_slow: Real,
     alpha_fast: Real,
     min_drop: Real,
+    lost_share: Real,
     srr: Real,
     srt: Real,
     str: Real,
@@ -89,7 +90,8 @@ struct CgrParams {
 }
 
 /// Augmented MCL's rates when `injection = true` and none are given.
-const DEFAULT_INJECTION: Injection = Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1 };
+const DEFAULT_INJECTION: Injection =
+    Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1, lost_share: 0.5 };
 
 impl Default for CgrParams {
     fn default() -> Self {
@@ -117,6 +119,7 @@ impl Default for CgrParams {
             alpha_slow: injection.alpha_slow,
             alpha_fast: injection.alpha_fast,
             min_drop: injection.min_drop,
+            lost_share: injection.lost_share,
             srr: m.srr,
             srt: m.srt,
             str: m.str,
@@ -200,6 +203,7 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
             alpha_slow: p.alpha_slow,
             alpha_fast: p.alpha_fast,
             min_drop: p.min_drop,
+            lost_share: p.lost_share,
         }),
         inside_opening: p.keep_inside.then_some(p.inside_opening),
     };

@@ -148,6 +148,14 @@ impl CgrModel {
                     found,
                 });
             }
+            if !(0.0..=1.0).contains(&i.lost_share) {
+                let found = i.lost_share;
+                return Err(crate::Error::OutOfRange {
+                    name: "lost_share",
+                    expected: "a share in [0, 1]",
+                    found,
+                });
+            }
         }
         let wall_lengths = map
             .walls
@@ -403,8 +411,15 @@ impl ParticleModel for CgrModel {
     type Scratch = ();
     type Gate = ();
 
+    /// A known start begins with the fewest particles (tracking needs no
+    /// more; the set grows towards `particles` only when the robot is
+    /// lost, see [`Population::correct`](crate::pf::population::Population::correct)),
+    /// a global one with the most.
     fn particles(&self) -> usize {
-        self.options.particles
+        match self.options.init {
+            Init::Known(_) => self.options.min_particles,
+            Init::Global => self.options.particles,
+        }
     }
 
     fn start(&self, _: &Observation2d) -> Pose2 {

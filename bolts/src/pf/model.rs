@@ -153,8 +153,9 @@ pub trait ParticleModel: Send + Sync + 'static {
 
 /// Augmented MCL's smoothing of the best particle's observation
 /// likelihood: a slow and a fast average; while the fast one is below the slow one by more
-/// than a dead band, a share 1 − fast/slow · e^`min_drop` of the particles
-/// is redrawn (see [`ParticleModel::inject`]).
+/// than a dead band, a share 1 − fast/slow · e^`min_drop` of the particles,
+/// and at least `lost_share`, is redrawn (see [`ParticleModel::inject`]);
+/// a set KLD-sampling sizes grows to that share of its most particles.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Injection {
     /// Rate of the slow average (0 < slow < fast ≤ 1).
@@ -167,6 +168,14 @@ pub struct Injection {
     /// particles, and one that happens to fit a look-alike place better
     /// for a moment takes the estimate there.
     pub min_drop: Real,
+    /// The least share redrawn once the fit has dropped past the dead
+    /// band (0 to 1). 1 − fast/slow starts small, and the moment one
+    /// redrawn particle fits a look-alike place the fast average recovers
+    /// and the search stops, usually before a draw has landed at the
+    /// robot's true place. A lost robot is better served by a mixture:
+    /// part of the set keeps what it believed (a drop may be people in
+    /// the way), the rest searches where the reading fits.
+    pub lost_share: Real,
 }
 
 /// One particle's correction.

@@ -122,13 +122,27 @@ impl Population {
             self.log_weights[slot] += l;
             self.lineage_weights[slot] += l;
         }
+        let share = match injection {
+            Some((i, fits)) => self.injection_share(fits, i),
+            None => 0.0,
+        };
         let n = self.len();
         let (weights, neff) = normalize(&self.log_weights, smoothing * self.start_len as Real / n as Real);
-        let resampled = neff < threshold * n as Real;
+        // A set KLD-sampling sizes grows when the fit drops: the share to
+        // redraw is of the most particles it may hold, not of the few a
+        // robot already found needs, so a lost robot is searched for with
+        // as many draws as a global start.
+        let grown = match kld {
+            Some(k) if share > 0.0 && scheme != Scheme::Ring => {
+                Some(((share * k.max as Real).ceil() as usize).clamp(k.min, k.max))
+            }
+            _ => None,
+        };
+        let resampled = neff < threshold * n as Real || grown.is_some();
         let count = match kld {
             Some(k) if resampled && scheme != Scheme::Ring => {
                 let poses: Vec<Pose2> = reports.iter().map(|r| r.0).collect();
-                k.count(&weights, &poses, self.seed, step)
+                k.count(&weights, &poses, self.seed, step).max(grown.unwrap_or(0))
             }
             _ => n,
         };
@@ -150,23 +164,28 @@ impl Population {
             self.lineage_weights = parents.iter().map(|&p| self.lineage_weights[p]).collect();
             self.log_weights = vec![0.0; parents.len()];
         }
-        let fresh = match injection {
-            Some((i, fits)) => self.fresh_slots(step, fits, i),
-            None => Vec::new(),
+        let fresh = match share > 0.0 {
+            true => (0..self.len())
+                .filter(|&j| {
+                    stream_for_step(self.seed, step, INJECTION_STREAM + j as u64).random::<Real>() < share
+                })
+                .collect(),
+            false => Vec::new(),
         };
         Ok(Decision { neff, parents, resampled, best: self.best(), weights, fresh })
     }
 
     /// Updates augmented MCL's averages with this reading's best fit
-    /// (`fits`: each slot's log fit) and picks the new slots to redraw:
-    /// each with probability max(0, 1 − fast/slow · e^min_drop), drawn per
-    /// slot. The best fit, not the mean: a set spread out by a turn fits
-    /// worse on average while its best particles still fit, and that is
-    /// no reason to think the robot lost.
-    fn fresh_slots(&mut self, step: u64, fits: &[Real], i: Injection) -> Vec<usize> {
+    /// (`fits`: each slot's log fit) and returns the share of the slots to
+    /// redraw: 1 − fast/slow · e^min_drop, at least `lost_share` once that
+    /// is positive, 0 while it is not; each slot drawn with that
+    /// probability. The best fit, not the mean: a set spread out by a
+    /// turn fits worse on average while its best particles still fit, and
+    /// that is no reason to think the robot lost.
+    fn injection_share(&mut self, fits: &[Real], i: Injection) -> Real {
         let best = fits.iter().copied().fold(Real::NEG_INFINITY, Real::max);
         if !best.is_finite() {
-            return Vec::new();
+            return 0.0;
         }
         let blend = |old: Real, alpha: Real| {
             let (a, b) = ((1.0 - alpha).ln() + old, alpha.ln() + best);
@@ -178,13 +197,8 @@ impl Population {
             Some((slow, fast)) => (blend(slow, i.alpha_slow), blend(fast, i.alpha_fast)),
         };
         self.averages = Some((slow, fast));
-        let p = (1.0 - (fast - slow + i.min_drop).exp()).max(0.0);
-        if p <= 0.0 {
-            return Vec::new();
-        }
-        (0..self.len())
-            .filter(|&j| stream_for_step(self.seed, step, INJECTION_STREAM + j as u64).random::<Real>() < p)
-            .collect()
+        let share = 1.0 - (fast - slow + i.min_drop).exp();
+        if share > 0.0 { share.max(i.lost_share) } else { 0.0 }
     }
 
     /// Replaces a lost parent (a draw can land on a weightless slot at
@@ -343,7 +357,7 @@ mod tests {
     #[test]
     fn a_spread_set_whose_best_still_fits_injects_nothing() {
         let mut p = Population::start(&[at(0.0); 100], 7, 0.0, at(0.0));
-        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5, min_drop: 0.1 });
+        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5, min_drop: 0.1, lost_share: 0.0 });
         let reports = vec![(at(1.0), -1.0); 100];
         for step in 1..=40 {
             // After step 10 all but a few particles fit badly.
@@ -367,7 +381,7 @@ mod tests {
     #[test]
     fn injection_starts_when_the_fit_drops_and_not_before() {
         let mut p = Population::start(&[at(0.0); 200], 7, 0.0, at(0.0));
-        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5, min_drop: 0.1 });
+        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.5, min_drop: 0.1, lost_share: 0.0 });
         let reports = vec![(at(1.0), -1.0); 200];
         let correct = |p: &mut Population, step: u64, fit: Real| {
             let fits = vec![fit; 200];
@@ -413,5 +427,67 @@ mod tests {
             again = correct(&mut q, step, -0.75);
         }
         assert_eq!(fresh, again);
+    }
+
+    #[test]
+    fn a_lost_set_grows_to_at_least_the_lost_share_of_the_most_particles() {
+        // 50 particles tracking one place, allowed up to 2000.
+        let kld = Some(Kld::new(50, 2000));
+        let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1, lost_share: 0.5 });
+        let mut p = Population::start(&[at(0.0); 50], 7, 0.0, at(0.0));
+        let correct = |p: &mut Population, step: u64, fit: Real| {
+            let n = p.len();
+            let reports = vec![(at(0.0), -1.0); n];
+            let fits = vec![fit; n];
+            let mark = (step as f64, at(0.0));
+            let scheme = Scheme::LowVariance;
+            p.correct(step, mark, &reports, 1.0 / 50.0, 0.5, scheme, injection.map(|i| (i, &fits[..])), kld)
+                .unwrap()
+        };
+        for step in 1..=20 {
+            let d = correct(&mut p, step, -0.05);
+            assert!(d.fresh.is_empty() && p.len() == 50, "tracking stays at 50 ({})", p.len());
+        }
+        // The first scan after the kidnapping: the fit drops by 2 per
+        // point, fast/slow by 0.3 of that, past the dead band.
+        let d = correct(&mut p, 21, -2.05);
+        assert!(d.resampled, "a lost set is resampled to grow");
+        assert!(p.len() >= 1000, "grown to half the most particles: {}", p.len());
+        let share = d.fresh.len() as Real / p.len() as Real;
+        assert!((0.45..0.6).contains(&share), "at least half redrawn: {share}");
+        // Without KLD-sampling the set keeps its size; the share holds.
+        let mut fixed = Population::start(&[at(0.0); 50], 7, 0.0, at(0.0));
+        for step in 1..=20 {
+            let reports = vec![(at(0.0), -1.0); 50];
+            let fits = vec![-0.05; 50];
+            fixed
+                .correct(
+                    step,
+                    (0.0, at(0.0)),
+                    &reports,
+                    0.02,
+                    0.5,
+                    Scheme::LowVariance,
+                    injection.map(|i| (i, &fits[..])),
+                    None,
+                )
+                .unwrap();
+        }
+        let reports = vec![(at(0.0), -1.0); 50];
+        let fits = vec![-2.05; 50];
+        let d = fixed
+            .correct(
+                21,
+                (0.0, at(0.0)),
+                &reports,
+                0.02,
+                0.5,
+                Scheme::LowVariance,
+                injection.map(|i| (i, &fits[..])),
+                None,
+            )
+            .unwrap();
+        assert_eq!(fixed.len(), 50);
+        assert!(d.fresh.len() >= 15, "about half of 50 redrawn: {}", d.fresh.len());
     }
 }

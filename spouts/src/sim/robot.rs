@@ -663,7 +663,9 @@ mod tests {
         }
         assert!(carries.windows(2).all(|w| w[0] != w[1]), "each seed its own carry");
         let bad = SimConfig { duration_secs: 4.0, kidnap: Some(kidnap), ..SimConfig::default() };
-        assert!(bad.check().unwrap_err().to_string().starts_with("a kidnapping needs 0 ≤ at_secs < the duration"));
+        assert!(
+            bad.check().unwrap_err().to_string().starts_with("a kidnapping needs 0 ≤ at_secs < the duration")
+        );
         let backwards = Kidnap { min_m: 9.0, max_m: 3.0, ..kidnap };
         assert!(SimConfig { kidnap: Some(backwards), ..SimConfig::default() }.check().is_err());
     }

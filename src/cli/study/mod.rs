@@ -1,4 +1,5 @@
-//! `squall study`: how robust is SLAM on these logs? Runs `squall slam`
+//! `squall study`: how robust is SLAM on these logs, or localization on
+//! these buildings (`--maps`, see [`localization`])? Runs `squall slam`
 //! for every (log, seed) as its own process, as many at once as `--jobs`,
 //! measures each run's CPU time and peak memory, scores each trajectory
 //! and the log's raw odometry on the log's relations, and writes
@@ -8,6 +9,7 @@
 //! that fails is a row of the report, never the end of the study (exit 1
 //! once everything is written).
 
+mod localization;
 mod report;
 mod runner;
 mod score;
@@ -36,8 +38,40 @@ use super::{EXIT_FAILED, EXIT_INVALID};
 pub(super) struct StudyArgs {
     /// The logs, comma-separated. Each is scored against its sibling
     /// relations file (`X.relations` for `X.clf`) when there is one.
-    #[arg(long, value_name = "A.clf,B.clf", value_delimiter = ',', required_unless_present = "sim_worlds")]
+    #[arg(long, value_name = "A.clf,B.clf", value_delimiter = ',', required_unless_present_any = ["sim_worlds", "maps"])]
     logs: Vec<PathBuf>,
+    /// Study localization instead: line maps, comma-separated. Every
+    /// (map, sensor, mode, seed) runs `squall localize --sim` with its
+    /// defaults; the report gives success, errors and times per (map,
+    /// sensor, mode).
+    #[arg(long, value_name = "A.txt,B.txt", value_delimiter = ',', conflicts_with_all = ["logs", "sim_worlds", "particles", "cutoff", "max_scans"])]
+    maps: Vec<PathBuf>,
+    /// With `--maps`: the simulated sensors, comma-separated.
+    #[arg(
+        long,
+        value_name = "laser,depth",
+        value_delimiter = ',',
+        default_value = "laser",
+        requires = "maps"
+    )]
+    inputs: Vec<localization::Sensor>,
+    /// With `--maps`: what each run is asked, comma-separated: `tracking`
+    /// (from the true start), `global` (from anywhere), `kidnap` (tracked,
+    /// then carried 5–20 m at `--kidnap-at`).
+    #[arg(
+        long,
+        value_name = "tracking,global,kidnap",
+        value_delimiter = ',',
+        default_value = "tracking,global,kidnap",
+        requires = "maps"
+    )]
+    modes: Vec<localization::Mode>,
+    /// With `--maps`: simulated seconds per run.
+    #[arg(long, value_name = "S", default_value_t = 20.0, requires = "maps")]
+    duration: f64,
+    /// With `--maps`: when kidnap runs are carried, seconds.
+    #[arg(long, value_name = "S", default_value_t = 8.0, requires = "maps")]
+    kidnap_at: f64,
     /// Simulated worlds to study as well, comma-separated: `office`,
     /// `campus` (a large open site, 80 m laser) or line-map files. Each
     /// becomes a log per `--odometry` quality (simulator seed 1,
@@ -126,6 +160,23 @@ struct Log {
 
 /// Runs `squall study`.
 pub(super) fn study(args: &StudyArgs) -> ExitCode {
+    if !args.maps.is_empty() {
+        if args.jobs == Some(0) {
+            eprintln!("error: --jobs must be at least 1");
+            return ExitCode::from(EXIT_INVALID);
+        }
+        return localization::study(&localization::Plan {
+            maps: args.maps.clone(),
+            sensors: args.inputs.clone(),
+            modes: args.modes.clone(),
+            seeds: args.seeds.clone(),
+            duration: args.duration,
+            kidnap_at: args.kidnap_at,
+            overrides: args.overrides.clone(),
+            jobs: args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+            out: args.out.clone(),
+        });
+    }
     let simulated = match worlds::plan(&args.sim_worlds, &args.odometry, args.sim_duration) {
         Ok(plan) => plan,
         Err(message) => {

@@ -1,0 +1,459 @@
+//! `squall study --maps`: how robust is localization on these buildings?
+//! Runs `squall localize --sim` for every (map, sensor, mode, seed) as its
+//! own process, as many at once as `--jobs`, and reports per (map,
+//! sensor, mode) how many runs succeeded, the median and worst of their
+//! errors and of their times, and their CPU.
+//!
+//! The modes, each scored in the map frame against the simulator's truth
+//! (`metrics.json`, `localization`):
+//!
+//! - `tracking`: from the true start; succeeds when every pose is within
+//!   0.2 m and 5° of the truth.
+//! - `global`: from anywhere (`--init global`); succeeds when it converges
+//!   within [`GLOBAL_WITHIN_S`] and stays.
+//! - `kidnap`: tracked from the true start, then carried 5–20 m at
+//!   `--kidnap-at`; succeeds when found again within [`KIDNAP_WITHIN_S`]
+//!   and kept.
+
+use std::ffi::OsString;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Mutex;
+use std::sync::mpsc;
+
+use squall_topology::fsio::write_atomic;
+
+use super::report::median;
+use super::runner::{self, Job, Measured};
+use super::{EXIT_FAILED, EXIT_INVALID, Seeds, command_line, progress_bar, writable};
+
+/// A global start succeeds when it converges within this many seconds.
+pub(super) const GLOBAL_WITHIN_S: f64 = 10.0;
+/// A kidnapped robot succeeds when found again within this many seconds.
+pub(super) const KIDNAP_WITHIN_S: f64 = 5.0;
+
+/// What a localization run is asked to do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum Mode {
+    /// From the true start.
+    Tracking,
+    /// From anywhere on the map.
+    Global,
+    /// From the true start, then carried elsewhere.
+    Kidnap,
+}
+
+impl Mode {
+    fn name(self) -> &'static str {
+        match self {
+            Mode::Tracking => "tracking",
+            Mode::Global => "global",
+            Mode::Kidnap => "kidnap",
+        }
+    }
+}
+
+/// The simulated sensor of a localization run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum Sensor {
+    /// The 180° laser.
+    Laser,
+    /// The depth camera, plane filtered.
+    Depth,
+}
+
+impl Sensor {
+    fn name(self) -> &'static str {
+        match self {
+            Sensor::Laser => "laser",
+            Sensor::Depth => "depth",
+        }
+    }
+}
+
+/// The localization study's settings, checked.
+#[derive(Debug)]
+pub(super) struct Plan {
+    pub(super) maps: Vec<PathBuf>,
+    pub(super) sensors: Vec<Sensor>,
+    pub(super) modes: Vec<Mode>,
+    pub(super) seeds: Seeds,
+    /// Simulated seconds per run.
+    pub(super) duration: f64,
+    /// When kidnap runs are carried, seconds.
+    pub(super) kidnap_at: f64,
+    /// `--set` values passed on to every run.
+    pub(super) overrides: Vec<String>,
+    pub(super) jobs: usize,
+    pub(super) out: PathBuf,
+}
+
+/// One (map, sensor, mode) of the study.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Cell {
+    map: usize,
+    sensor: Sensor,
+    mode: Mode,
+}
+
+/// What one run's `metrics.json` says (`localization`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Scored {
+    mean_m: f64,
+    max_m: f64,
+    within_share: f64,
+    converged_after_s: Option<f64>,
+    carry_m: Option<f64>,
+    recovered_after_s: Option<f64>,
+}
+
+/// One run: its cell, seed, and what came of it.
+#[derive(Debug, Clone)]
+struct Row {
+    cell: Cell,
+    seed: u64,
+    /// Why it failed to run; empty when it ran.
+    error: String,
+    scored: Option<Scored>,
+    measured: Option<Measured>,
+}
+
+impl Row {
+    /// The time the mode is judged by: to convergence (global), to
+    /// recovery (kidnap); `None` for tracking, or when it never came.
+    fn time_s(&self) -> Option<f64> {
+        let s = self.scored?;
+        match self.cell.mode {
+            Mode::Tracking => None,
+            Mode::Global => s.converged_after_s,
+            Mode::Kidnap => s.recovered_after_s,
+        }
+    }
+
+    /// Whether the run did what its mode asks (see the module's doc).
+    fn success(&self) -> bool {
+        let Some(s) = self.scored else { return false };
+        match self.cell.mode {
+            Mode::Tracking => s.converged_after_s == Some(0.0),
+            Mode::Global => s.converged_after_s.is_some_and(|t| t <= GLOBAL_WITHIN_S),
+            Mode::Kidnap => s.recovered_after_s.is_some_and(|t| t <= KIDNAP_WITHIN_S),
+        }
+    }
+}
+
+/// Checks the maps (they exist and parse, their names differ) and the
+/// times; the output folder is then made writable.
+pub(super) fn check(plan: &Plan) -> Result<(), String> {
+    if plan.seeds.0.is_empty() {
+        return Err("--seeds gives no seed".into());
+    }
+    if !(plan.duration.is_finite() && plan.duration > 0.0) {
+        return Err(format!("--duration must be > 0 seconds, got {}", plan.duration));
+    }
+    if plan.modes.contains(&Mode::Kidnap) && !(plan.kidnap_at >= 0.0 && plan.kidnap_at < plan.duration) {
+        return Err(format!(
+            "--kidnap-at must lie within the run (0 ≤ {} < --duration {})",
+            plan.kidnap_at, plan.duration
+        ));
+    }
+    for (i, map) in plan.maps.iter().enumerate() {
+        squall_core::linemap::LineMap::load(map).map_err(|e| e.to_string())?;
+        if let Some(other) = plan.maps[..i].iter().find(|m| name(m) == name(map)) {
+            return Err(format!(
+                "{} and {} would share the run folders runs/{}-*: rename one",
+                other.display(),
+                map.display(),
+                name(map)
+            ));
+        }
+    }
+    writable(&plan.out)
+}
+
+/// `CVAP7` for `maps/CVAP7_vector.txt`: the file name without `.txt` and
+/// without the shared maps' `_vector`.
+fn name(map: &Path) -> String {
+    let stem = map.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    stem.strip_suffix("_vector").unwrap_or(&stem).to_string()
+}
+
+/// The arguments of one run's `squall localize` (`--out` is the runner's).
+fn localize_args(plan: &Plan, cell: Cell, seed: u64) -> Vec<OsString> {
+    let mut v: Vec<OsString> = vec![
+        "localize".into(),
+        "--map".into(),
+        plan.maps[cell.map].clone().into(),
+        "--sim".into(),
+        "--input".into(),
+        cell.sensor.name().into(),
+        "--duration".into(),
+        plan.duration.to_string().into(),
+        "--seed".into(),
+        seed.to_string().into(),
+        "--init".into(),
+        if cell.mode == Mode::Global { "global" } else { "known" }.into(),
+    ];
+    if cell.mode == Mode::Kidnap {
+        v.extend(["--kidnap-at".into(), plan.kidnap_at.to_string().into()]);
+    }
+    for s in &plan.overrides {
+        v.extend(["--set".into(), s.into()]);
+    }
+    v
+}
+
+/// Runs the localization study: every run, then study.csv and study.md
+/// (printed too). Exit 1 when a run failed to run (not when it failed to
+/// localize: that is a result).
+pub(super) fn study(plan: &Plan) -> ExitCode {
+    if let Err(message) = check(plan) {
+        eprintln!("error: {message}");
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let cells: Vec<Cell> = (0..plan.maps.len())
+        .flat_map(|map| {
+            plan.sensors
+                .iter()
+                .flat_map(move |&sensor| plan.modes.iter().map(move |&mode| Cell { map, sensor, mode }))
+        })
+        .collect();
+    let jobs: Vec<(Cell, Job)> = cells
+        .iter()
+        .flat_map(|&cell| plan.seeds.0.iter().map(move |&seed| (cell, seed)))
+        .map(|(cell, seed)| {
+            let folder =
+                format!("{}-{}-{}-s{seed}", name(&plan.maps[cell.map]), cell.sensor.name(), cell.mode.name());
+            let job = Job {
+                log: cell.map,
+                seed,
+                dir: plan.out.join("runs").join(folder),
+                args: localize_args(plan, cell, seed),
+            };
+            (cell, job)
+        })
+        .collect();
+    let rows = run_all(&jobs, plan.jobs);
+    let md = markdown(plan, &cells, &rows);
+    print!("{md}");
+    let written = write_atomic(&plan.out.join("study.csv"), csv(plan, &rows).as_bytes())
+        .and_then(|()| write_atomic(&plan.out.join("study.md"), md.as_bytes()));
+    if let Err(e) = written {
+        eprintln!("error: cannot write to {}: {e}", plan.out.display());
+        return ExitCode::from(EXIT_FAILED);
+    }
+    let failed = rows.iter().filter(|r| !r.error.is_empty()).count();
+    if failed > 0 {
+        eprintln!(
+            "error: {failed} of {} runs failed to run (see study.csv and runs/*/stderr.log)",
+            rows.len()
+        );
+        return ExitCode::from(EXIT_FAILED);
+    }
+    ExitCode::SUCCESS
+}
+
+/// Runs every job on `threads` threads, counting finished runs on the
+/// progress bar; returns the rows in the jobs' order.
+fn run_all(jobs: &[(Cell, Job)], threads: usize) -> Vec<Row> {
+    let bar = progress_bar(jobs.len() as u64);
+    let next = Mutex::new(0usize);
+    let (done, finished) = mpsc::channel::<(usize, Result<Measured, String>)>();
+    let mut rows: Vec<Option<Row>> = (0..jobs.len()).map(|_| None).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..threads.min(jobs.len()) {
+            let done = done.clone();
+            let next = &next;
+            scope.spawn(move || {
+                loop {
+                    let i = {
+                        let mut n = next.lock().unwrap_or_else(|e| e.into_inner());
+                        *n += 1;
+                        *n - 1
+                    };
+                    let Some((_, job)) = jobs.get(i) else { break };
+                    if done.send((i, runner::run(job))).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(done);
+        let mut succeeded = 0;
+        for (i, outcome) in finished {
+            let (cell, job) = &jobs[i];
+            let row = row_of(*cell, job, outcome);
+            succeeded += usize::from(row.success());
+            let line = match (&row.error, row.scored) {
+                (e, _) if !e.is_empty() => format!("{}: failed: {e}", job.dir.display()),
+                (_, Some(s)) => format!(
+                    "{}: {} (mean {:.3} m{})",
+                    job.dir.display(),
+                    if row.success() { "ok" } else { "missed" },
+                    s.mean_m,
+                    row.time_s().map_or(String::new(), |t| format!(", {t:.1} s"))
+                ),
+                (_, None) => format!("{}: no score", job.dir.display()),
+            };
+            if bar.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                bar.println(line);
+            }
+            bar.inc(1);
+            bar.set_message(format!("{succeeded} succeeded"));
+            rows[i] = Some(row);
+        }
+    });
+    bar.finish_and_clear();
+    rows.into_iter().map(|r| r.expect("every job reports once")).collect()
+}
+
+/// The row of a finished run, scored from its `metrics.json`.
+fn row_of(cell: Cell, job: &Job, outcome: Result<Measured, String>) -> Row {
+    let mut row = Row { cell, seed: job.seed, error: String::new(), scored: None, measured: None };
+    match outcome {
+        Err(e) => row.error = e,
+        Ok(m) => {
+            if let Some(e) = &m.failure {
+                row.error.clone_from(e);
+            } else {
+                match read_score(&job.dir.join("metrics.json")) {
+                    Ok(s) => row.scored = Some(s),
+                    Err(e) => row.error = e,
+                }
+            }
+            row.measured = Some(m);
+        }
+    }
+    row
+}
+
+/// The `localization` figures of a run's metrics.json.
+fn read_score(path: &Path) -> Result<Scored, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let l = json.get("localization").ok_or_else(|| format!("{}: no localization score", path.display()))?;
+    let number = |v: &serde_json::Value, key: &str| v.get(key).and_then(serde_json::Value::as_f64);
+    let required =
+        |key: &str| number(l, key).ok_or_else(|| format!("{}: no localization.{key}", path.display()));
+    let kidnap = l.get("kidnap");
+    Ok(Scored {
+        mean_m: required("map_mean_m")?,
+        max_m: required("map_max_m")?,
+        within_share: required("map_within_share")?,
+        converged_after_s: number(l, "converged_after_s"),
+        carry_m: kidnap.and_then(|k| number(k, "carry_m")),
+        recovered_after_s: kidnap.and_then(|k| number(k, "recovered_after_s")),
+    })
+}
+
+/// One line per run.
+fn csv(plan: &Plan, rows: &[Row]) -> String {
+    let mut out = String::from(
+        "map,sensor,mode,seed,success,mean_m,max_m,within_share,converged_after_s,carry_m,recovered_after_s,cpu_s,peak_rss_mb,error\n",
+    );
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+    for r in rows {
+        let s = r.scored;
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
+            name(&plan.maps[r.cell.map]),
+            r.cell.sensor.name(),
+            r.cell.mode.name(),
+            r.seed,
+            r.success(),
+            opt(s.map(|s| s.mean_m)),
+            opt(s.map(|s| s.max_m)),
+            opt(s.map(|s| s.within_share)),
+            opt(s.and_then(|s| s.converged_after_s)),
+            opt(s.and_then(|s| s.carry_m)),
+            opt(s.and_then(|s| s.recovered_after_s)),
+            opt(r.measured.as_ref().map(|m| m.cpu_secs)),
+            opt(r.measured.as_ref().map(|m| m.peak_rss_mb)),
+            r.error.replace('"', "'"),
+        );
+    }
+    out
+}
+
+/// The summary: one table row per (map, sensor, mode).
+fn markdown(plan: &Plan, cells: &[Cell], rows: &[Row]) -> String {
+    let mut md = format!("# Localization study\n\n`{}`\n\n", command_line());
+    let _ = writeln!(
+        md,
+        "Success: tracking, every pose within 0.2 m and 5°; global, converged within {GLOBAL_WITHIN_S} s and \
+         stayed; kidnap (carried 5–20 m at {} s), found again within {KIDNAP_WITHIN_S} s and kept. Errors are \
+         each run's mean position error in the map frame; times are to convergence (global) or recovery \
+         (kidnap), over the runs that got there.\n",
+        plan.kidnap_at
+    );
+    md.push_str("| map | sensor | mode | success | mean error median / worst (m) | time median / worst (s) | CPU median / worst (s) | missed (seed: mean m) |\n");
+    md.push_str("| --- | --- | --- | --- | --- | --- | --- | --- |\n");
+    let pair = |v: &[f64], digits: usize| match (median(v), v.iter().copied().reduce(f64::max)) {
+        (Some(m), Some(w)) => format!("{m:.digits$} / {w:.digits$}"),
+        _ => "–".to_string(),
+    };
+    for &cell in cells {
+        let runs: Vec<&Row> = rows.iter().filter(|r| r.cell == cell).collect();
+        let ok = runs.iter().filter(|r| r.success()).count();
+        let errors: Vec<f64> = runs.iter().filter_map(|r| r.scored.map(|s| s.mean_m)).collect();
+        let times: Vec<f64> = runs.iter().filter_map(|r| r.time_s()).collect();
+        let cpu: Vec<f64> = runs.iter().filter_map(|r| r.measured.as_ref().map(|m| m.cpu_secs)).collect();
+        let missed: Vec<String> = runs
+            .iter()
+            .filter(|r| !r.success())
+            .map(|r| match r.scored {
+                Some(s) => format!("{}: {:.2}", r.seed, s.mean_m),
+                None => format!("{}: failed", r.seed),
+            })
+            .collect();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {ok}/{} | {} | {} | {} | {} |",
+            name(&plan.maps[cell.map]),
+            cell.sensor.name(),
+            cell.mode.name(),
+            runs.len(),
+            pair(&errors, 3),
+            if cell.mode == Mode::Tracking { "–".to_string() } else { pair(&times, 1) },
+            pair(&cpu, 1),
+            if missed.is_empty() { "–".to_string() } else { missed.join(", ") },
+        );
+    }
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(mode: Mode, scored: Scored) -> Row {
+        let cell = Cell { map: 0, sensor: Sensor::Laser, mode };
+        Row { cell, seed: 1, error: String::new(), scored: Some(scored), measured: None }
+    }
+
+    #[test]
+    fn each_mode_succeeds_by_its_own_measure() {
+        let tracked = Scored { converged_after_s: Some(0.0), ..Scored::default() };
+        assert!(row(Mode::Tracking, tracked).success());
+        let late = Scored { converged_after_s: Some(0.1), ..Scored::default() };
+        assert!(!row(Mode::Tracking, late).success(), "a tracking run off at any pose missed");
+        assert!(row(Mode::Global, Scored { converged_after_s: Some(9.9), ..Scored::default() }).success());
+        assert!(!row(Mode::Global, Scored { converged_after_s: Some(10.1), ..Scored::default() }).success());
+        assert!(!row(Mode::Global, Scored::default()).success(), "never converged");
+        let found =
+            Scored { recovered_after_s: Some(4.0), converged_after_s: Some(12.0), ..Scored::default() };
+        assert!(row(Mode::Kidnap, found).success());
+        assert_eq!(row(Mode::Kidnap, found).time_s(), Some(4.0));
+        assert!(!row(Mode::Kidnap, Scored { recovered_after_s: Some(6.0), ..Scored::default() }).success());
+    }
+
+    #[test]
+    fn map_names_drop_the_shared_maps_suffix() {
+        assert_eq!(name(Path::new("d/CVAP7_vector.txt")), "CVAP7");
+        assert_eq!(name(Path::new("hall.txt")), "hall");
+    }
+}
