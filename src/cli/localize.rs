@@ -200,12 +200,15 @@ struct Route {
     start: Pose2,
     /// The kidnapping, when one was asked for.
     carry: Option<Carry>,
+    /// The raw odometry at every scan or frame, started at the true
+    /// start: where dead reckoning alone would put the robot on the map.
+    odometry: Trajectory,
 }
 
-/// Replays the run's simulated route (the robot's motion alone, the
-/// sensor's rays left out) for its start and its kidnapping. An error if
-/// the settings are out of range or no place of the map lies 5–20 m from
-/// where the robot is to be kidnapped.
+/// Replays the run's simulated route (the robot's motion and odometry,
+/// the sensor's rays left out) for its start, its kidnapping and its
+/// odometry. An error if the settings are out of range or no place of the
+/// map lies 5–20 m from where the robot is to be kidnapped.
 fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route, String> {
     let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
     let kidnap = args.kidnap_at.map(|at_secs| Kidnap {
@@ -223,15 +226,15 @@ fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route
         ..SimConfig::default()
     };
     // `new` checks the config first.
-    let mut sim = Simulation::new(floor, config).map_err(|e| format!("--kidnap-at: {e}"))?;
-    let first = sim.by_ref().find_map(|e| match e {
-        SimEvent::Scan(_, truth) => Some(truth),
-        SimEvent::Odom(_) => None,
-    });
-    let start = first.ok_or("the simulation produced no scan")?;
-    if kidnap.is_some() {
-        sim.by_ref().for_each(drop);
+    let mut sim = Simulation::new(floor, config).map_err(|e| e.to_string())?;
+    let mut first: Option<(Pose2, Pose2)> = None;
+    let mut odometry = Trajectory::default();
+    for event in sim.by_ref() {
+        let SimEvent::Scan(scan, truth) = event else { continue };
+        let (truth0, odometry0) = *first.get_or_insert((truth, scan.odometry));
+        odometry.push(scan.stamp, truth0.compose(&scan.odometry.relative_to(&odometry0)));
     }
+    let start = first.ok_or("the simulation produced no scan")?.0;
     let carry = sim.carried();
     if let (Some(k), Some(c)) = (kidnap, carry)
         && !(k.min_m..=k.max_m).contains(&c.distance())
@@ -244,7 +247,7 @@ fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route
             c.distance()
         ));
     }
-    Ok(Route { start, carry })
+    Ok(Route { start, carry, odometry })
 }
 
 /// Runs `squall localize`.
@@ -257,8 +260,7 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
         }
     };
     let spec = TopologySpec::parse_with("localize.toml (built in)", LOCALIZE_TOML, &overrides);
-    let carry = route.carry;
-    let scorer = |dir: &Path| score(dir, carry);
+    let scorer = |dir: &Path| score(dir, &route);
     match report_invalid(spec) {
         Ok(topology) => run::run_scored(&topology, Some(args.out.clone()), false, None, Some(&scorer)),
         Err(code) => code,
@@ -267,16 +269,31 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
 
 /// The run's trajectory against the simulator's ground truth, in the map
 /// frame (a localizer's poses are in the map's frame: no alignment),
-/// printed and returned for metrics.json under `localization`; with a
-/// kidnapping, also how long the robot was lost after it (`kidnap`).
-fn score(dir: &Path, carry: Option<Carry>) -> Result<(&'static str, serde_json::Value), String> {
+/// printed and returned for metrics.json under `localization`; beside
+/// it the raw odometry's (`odometry`) and how far the estimate ever was
+/// worse than it (`worst_over_odometry_m`: the largest of the estimate's
+/// error less the odometry's, over the poses); with a kidnapping, also
+/// how long the robot was lost after it (`kidnap`).
+fn score(dir: &Path, route: &Route) -> Result<(&'static str, serde_json::Value), String> {
     let read = |name: &str| Trajectory::read_tum(&dir.join(name)).map_err(|e| e.to_string());
     let (estimate, truth) = (read("trajectory.tum")?, read("ground_truth.tum")?);
     let score = map_frame::score(&estimate, &truth)
         .ok_or("no pose of trajectory.tum shares a stamp with ground_truth.tum")?;
     print_map_frame(&score, false);
     let mut value = serde_json::to_value(score).map_err(|e| e.to_string())?;
-    if let Some(c) = carry {
+    if let (Some(odometry), Some(worst)) = (
+        map_frame::score(&route.odometry, &truth),
+        map_frame::worst_excess(&estimate, &route.odometry, &truth),
+    ) {
+        println!(
+            "  raw odometry: {:.4} m mean, {:.4} m max; the estimate at most {worst:.4} m worse than it",
+            odometry.map_mean_m, odometry.map_max_m
+        );
+        value["odometry"] =
+            serde_json::json!({ "map_mean_m": odometry.map_mean_m, "map_max_m": odometry.map_max_m });
+        value["worst_over_odometry_m"] = serde_json::json!(worst);
+    }
+    if let Some(c) = route.carry {
         let recovered = map_frame::recovered_after(&estimate, &truth, c.stamp);
         match recovered {
             Some(t) => println!(

@@ -90,6 +90,21 @@ pub fn recovered_after(estimate: &Trajectory, truth: &Trajectory, since: f64) ->
     Some(pairs[settled].0 - since)
 }
 
+/// The largest amount by which `estimate`'s position error exceeds
+/// `reference`'s (say, raw odometry's) at the stamps all three share,
+/// metres; negative when the estimate is better at every one. `None` if
+/// no stamp is shared. How a localizer is held to "never worse than dead
+/// reckoning" where its sensor sees nothing.
+pub fn worst_excess(estimate: &Trajectory, reference: &Trajectory, truth: &Trajectory) -> Option<f64> {
+    super::common_stamps(estimate, truth)
+        .into_iter()
+        .filter_map(|(t, p, g)| {
+            let r = reference.at(t, super::relations::STAMP_TOLERANCE)?;
+            Some(p.distance(&g) - r.distance(&g))
+        })
+        .reduce(f64::max)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -112,6 +127,19 @@ mod tests {
             t.push(*s, Pose2::new(p.x + o.x, p.y + o.y, p.theta + o.theta));
         }
         t
+    }
+
+    #[test]
+    fn the_worst_excess_is_the_largest_gap_over_the_reference_error() {
+        let truth = walk();
+        // The reference drifts 0.01 m per pose; the estimate is 0.05 m off
+        // throughout and 0.5 m off at pose 10.
+        let reference = moved(&truth, |i| Pose2::new(0.01 * i as f64, 0.0, 0.0));
+        let estimate = moved(&truth, |i| Pose2::new(0.0, if i == 10 { 0.5 } else { 0.05 }, 0.0));
+        let worst = worst_excess(&estimate, &reference, &truth).unwrap();
+        assert!((worst - 0.4).abs() < 1e-9, "{worst}");
+        assert!(worst_excess(&truth, &reference, &truth).unwrap() <= 0.0, "the truth is never worse");
+        assert_eq!(worst_excess(&estimate, &Trajectory::default(), &truth), None);
     }
 
     #[test]

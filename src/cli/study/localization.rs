@@ -106,6 +106,8 @@ struct Scored {
     converged_after_s: Option<f64>,
     carry_m: Option<f64>,
     recovered_after_s: Option<f64>,
+    /// The most the estimate's error exceeded raw odometry's, m.
+    over_odometry_m: Option<f64>,
 }
 
 /// One run: its cell, seed, and what came of it.
@@ -346,20 +348,21 @@ fn read_score(path: &Path) -> Result<Scored, String> {
         converged_after_s: number(l, "converged_after_s"),
         carry_m: kidnap.and_then(|k| number(k, "carry_m")),
         recovered_after_s: kidnap.and_then(|k| number(k, "recovered_after_s")),
+        over_odometry_m: number(l, "worst_over_odometry_m"),
     })
 }
 
 /// One line per run.
 fn csv(plan: &Plan, rows: &[Row]) -> String {
     let mut out = String::from(
-        "map,sensor,mode,seed,success,mean_m,max_m,within_share,converged_after_s,carry_m,recovered_after_s,cpu_s,peak_rss_mb,error\n",
+        "map,sensor,mode,seed,success,mean_m,max_m,within_share,converged_after_s,carry_m,recovered_after_s,over_odometry_m,cpu_s,peak_rss_mb,error\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
     for r in rows {
         let s = r.scored;
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
             name(&plan.maps[r.cell.map]),
             r.cell.sensor.name(),
             r.cell.mode.name(),
@@ -371,6 +374,7 @@ fn csv(plan: &Plan, rows: &[Row]) -> String {
             opt(s.and_then(|s| s.converged_after_s)),
             opt(s.and_then(|s| s.carry_m)),
             opt(s.and_then(|s| s.recovered_after_s)),
+            opt(s.and_then(|s| s.over_odometry_m)),
             opt(r.measured.as_ref().map(|m| m.cpu_secs)),
             opt(r.measured.as_ref().map(|m| m.peak_rss_mb)),
             r.error.replace('"', "'"),
@@ -387,11 +391,12 @@ fn markdown(plan: &Plan, cells: &[Cell], rows: &[Row]) -> String {
         "Success: tracking, every pose within 0.2 m and 5°; global, converged within {GLOBAL_WITHIN_S} s and \
          stayed; kidnap (carried 5–20 m at {} s), found again within {KIDNAP_WITHIN_S} s and kept. Errors are \
          each run's mean position error in the map frame; times are to convergence (global) or recovery \
-         (kidnap), over the runs that got there.\n",
+         (kidnap), over the runs that got there. Worse than odometry: the largest amount by which a run's \
+         position error exceeded the raw odometry's (started at the true start) at any pose.\n",
         plan.kidnap_at
     );
-    md.push_str("| map | sensor | mode | success | mean error median / worst (m) | time median / worst (s) | CPU median / worst (s) | missed (seed: mean m) |\n");
-    md.push_str("| --- | --- | --- | --- | --- | --- | --- | --- |\n");
+    md.push_str("| map | sensor | mode | success | mean error median / worst (m) | time median / worst (s) | worse than odometry by, median / worst (m) | CPU median / worst (s) | missed (seed: mean m) |\n");
+    md.push_str("| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     let pair = |v: &[f64], digits: usize| match (median(v), v.iter().copied().reduce(f64::max)) {
         (Some(m), Some(w)) => format!("{m:.digits$} / {w:.digits$}"),
         _ => "–".to_string(),
@@ -402,6 +407,7 @@ fn markdown(plan: &Plan, cells: &[Cell], rows: &[Row]) -> String {
         let errors: Vec<f64> = runs.iter().filter_map(|r| r.scored.map(|s| s.mean_m)).collect();
         let times: Vec<f64> = runs.iter().filter_map(|r| r.time_s()).collect();
         let cpu: Vec<f64> = runs.iter().filter_map(|r| r.measured.as_ref().map(|m| m.cpu_secs)).collect();
+        let over: Vec<f64> = runs.iter().filter_map(|r| r.scored.and_then(|s| s.over_odometry_m)).collect();
         let missed: Vec<String> = runs
             .iter()
             .filter(|r| !r.success())
@@ -412,13 +418,14 @@ fn markdown(plan: &Plan, cells: &[Cell], rows: &[Row]) -> String {
             .collect();
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {ok}/{} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {ok}/{} | {} | {} | {} | {} | {} |",
             name(&plan.maps[cell.map]),
             cell.sensor.name(),
             cell.mode.name(),
             runs.len(),
             pair(&errors, 3),
             if cell.mode == Mode::Tracking { "–".to_string() } else { pair(&times, 1) },
+            if cell.mode == Mode::Kidnap { "–".to_string() } else { pair(&over, 3) },
             pair(&cpu, 1),
             if missed.is_empty() { "–".to_string() } else { missed.join(", ") },
         );
