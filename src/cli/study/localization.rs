@@ -15,18 +15,15 @@
 //!   `--kidnap-at`; succeeds when found again within [`KIDNAP_WITHIN_S`]
 //!   and kept.
 
+use squall_topology::fsio::write_atomic;
 use std::ffi::OsString;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Mutex;
-use std::sync::mpsc;
-
-use squall_topology::fsio::write_atomic;
 
 use super::report::median;
-use super::runner::{self, Job, Measured};
-use super::{EXIT_FAILED, EXIT_INVALID, Seeds, command_line, progress_bar, writable};
+use super::runner::{Job, Measured};
+use super::{EXIT_FAILED, EXIT_INVALID, Seeds, command_line, run_pool, writable};
 
 /// A global start succeeds when it converges within this many seconds.
 pub(super) const GLOBAL_WITHIN_S: f64 = 10.0;
@@ -255,60 +252,29 @@ pub(super) fn study(plan: &Plan) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// Runs every job on `threads` threads, counting finished runs on the
-/// progress bar; returns the rows in the jobs' order.
+/// Runs every job, `threads` at once; returns the rows in the jobs'
+/// order.
 fn run_all(jobs: &[(Cell, Job)], threads: usize) -> Vec<Row> {
-    let bar = progress_bar(jobs.len() as u64);
-    let next = Mutex::new(0usize);
-    let (done, finished) = mpsc::channel::<(usize, Result<Measured, String>)>();
-    let mut rows: Vec<Option<Row>> = (0..jobs.len()).map(|_| None).collect();
-    std::thread::scope(|scope| {
-        for _ in 0..threads.min(jobs.len()) {
-            let done = done.clone();
-            let next = &next;
-            scope.spawn(move || {
-                loop {
-                    let i = {
-                        let mut n = next.lock().unwrap_or_else(|e| e.into_inner());
-                        *n += 1;
-                        *n - 1
-                    };
-                    let Some((_, job)) = jobs.get(i) else { break };
-                    if done.send((i, runner::run(job))).is_err() {
-                        break;
-                    }
-                }
-            });
-        }
-        drop(done);
-        let mut succeeded = 0;
-        for (i, outcome) in finished {
-            let (cell, job) = &jobs[i];
-            let row = row_of(*cell, job, outcome);
-            succeeded += usize::from(row.success());
-            let line = match (&row.error, row.scored) {
-                (e, _) if !e.is_empty() => format!("{}: failed: {e}", job.dir.display()),
-                (_, Some(s)) => format!(
-                    "{}: {} (mean {:.3} m{})",
-                    job.dir.display(),
-                    if row.success() { "ok" } else { "missed" },
-                    s.mean_m,
-                    row.time_s().map_or(String::new(), |t| format!(", {t:.1} s"))
-                ),
-                (_, None) => format!("{}: no score", job.dir.display()),
-            };
-            if bar.is_hidden() {
-                eprintln!("{line}");
-            } else {
-                bar.println(line);
-            }
-            bar.inc(1);
-            bar.set_message(format!("{succeeded} succeeded"));
-            rows[i] = Some(row);
-        }
-    });
-    bar.finish_and_clear();
-    rows.into_iter().map(|r| r.expect("every job reports once")).collect()
+    let mut succeeded = 0;
+    let refs: Vec<&Job> = jobs.iter().map(|(_, job)| job).collect();
+    run_pool(&refs, threads, |i, outcome, bar| {
+        let (cell, job) = &jobs[i];
+        let row = row_of(*cell, job, outcome);
+        succeeded += usize::from(row.success());
+        let line = match (&row.error, row.scored) {
+            (e, _) if !e.is_empty() => format!("{}: failed: {e}", job.dir.display()),
+            (_, Some(s)) => format!(
+                "{}: {} (mean {:.3} m{})",
+                job.dir.display(),
+                if row.success() { "ok" } else { "missed" },
+                s.mean_m,
+                row.time_s().map_or(String::new(), |t| format!(", {t:.1} s"))
+            ),
+            (_, None) => format!("{}: no score", job.dir.display()),
+        };
+        bar.set_message(format!("{succeeded} succeeded"));
+        (row, line)
+    })
 }
 
 /// The row of a finished run, scored from its `metrics.json`.

@@ -349,13 +349,18 @@ fn slam_args(args: &StudyArgs, log: &Path, seed: u64) -> Vec<OsString> {
 }
 
 /// Runs every job on `threads` threads, each waiting on one child at a
-/// time, while this thread counts finished runs on the progress bar;
-/// returns the rows in the jobs' order.
-fn run_all(jobs: &[Job], logs: &[Log], odometry: &[Option<Accuracy>], threads: usize) -> Vec<Row> {
+/// time, while this thread turns each finished run into its row and the
+/// line to print (`finish`, which may also set the bar's message) and
+/// counts it on the progress bar; returns the rows in the jobs' order.
+fn run_pool<R>(
+    jobs: &[&Job],
+    threads: usize,
+    mut finish: impl FnMut(usize, Result<Measured, String>, &ProgressBar) -> (R, String),
+) -> Vec<R> {
     let bar = progress_bar(jobs.len() as u64);
     let next = Mutex::new(0usize);
     let (done, finished) = mpsc::channel::<(usize, Result<Measured, String>)>();
-    let mut rows: Vec<Option<Row>> = (0..jobs.len()).map(|_| None).collect();
+    let mut rows: Vec<Option<R>> = (0..jobs.len()).map(|_| None).collect();
     std::thread::scope(|scope| {
         for _ in 0..threads.min(jobs.len()) {
             let done = done.clone();
@@ -375,33 +380,42 @@ fn run_all(jobs: &[Job], logs: &[Log], odometry: &[Option<Accuracy>], threads: u
             });
         }
         drop(done);
-        let mut worst = f64::NAN;
         for (i, outcome) in finished {
-            let job = &jobs[i];
-            let log = &logs[job.log];
-            let row = row_of(job, log, odometry[job.log], outcome);
-            if let Some(e) = row.accuracy.map(|a| a.trans_m) {
-                worst = worst.max(e);
-            }
-            let line = match (&row.status, row.accuracy) {
-                (Status::Failed, _) => format!("{}: failed: {}", job.dir.display(), row.error),
-                (Status::Ok, Some(a)) => format!("{}: {:.4} m", job.dir.display(), a.trans_m),
-                (Status::Ok, None) => format!("{}: ok (no relations)", job.dir.display()),
-            };
+            let (row, line) = finish(i, outcome, &bar);
             if bar.is_hidden() {
                 eprintln!("{line}");
             } else {
                 bar.println(line);
             }
             bar.inc(1);
-            if worst.is_finite() {
-                bar.set_message(format!("worst {worst:.4} m"));
-            }
             rows[i] = Some(row);
         }
     });
     bar.finish_and_clear();
     rows.into_iter().map(|r| r.expect("every job reports once")).collect()
+}
+
+/// Runs every (log, seed) job; returns the rows in the jobs' order.
+fn run_all(jobs: &[Job], logs: &[Log], odometry: &[Option<Accuracy>], threads: usize) -> Vec<Row> {
+    let mut worst = f64::NAN;
+    let refs: Vec<&Job> = jobs.iter().collect();
+    run_pool(&refs, threads, |i, outcome, bar| {
+        let job = &jobs[i];
+        let log = &logs[job.log];
+        let row = row_of(job, log, odometry[job.log], outcome);
+        if let Some(e) = row.accuracy.map(|a| a.trans_m) {
+            worst = worst.max(e);
+        }
+        let line = match (&row.status, row.accuracy) {
+            (Status::Failed, _) => format!("{}: failed: {}", job.dir.display(), row.error),
+            (Status::Ok, Some(a)) => format!("{}: {:.4} m", job.dir.display(), a.trans_m),
+            (Status::Ok, None) => format!("{}: ok (no relations)", job.dir.display()),
+        };
+        if worst.is_finite() {
+            bar.set_message(format!("worst {worst:.4} m"));
+        }
+        (row, line)
+    })
 }
 
 /// Counts finished runs on stderr when it is a terminal; hidden otherwise.
