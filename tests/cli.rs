@@ -895,6 +895,30 @@ fn tum_xy(path: &Path) -> Vec<(f64, f64, f64)> {
 }
 
 #[test]
+fn a_kidnapped_robot_is_found_again_and_the_carry_reported_is_the_one_simulated() {
+    let map = shared_data("linemaps/CVAP7_vector.txt");
+    let (dir, cache) = (out_dir("localize-kidnap"), out_dir("localize-kidnap-scenes"));
+    let args = ["--duration", "14", "--kidnap-at", "6", "--seed", "2"];
+    localize(&map, &dir, &cache, &args);
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let l = &metrics["localization"];
+    let (at, carry) = (l["kidnap"]["at_s"].as_f64().unwrap(), l["kidnap"]["carry_m"].as_f64().unwrap());
+    assert!((5.0..=20.0).contains(&carry), "{l}");
+    // The ground truth the run wrote jumps by the reported carry at the
+    // reported instant: the replay before the run saw the run's robot.
+    let truth = tum_xy(&dir.join("ground_truth.tum"));
+    let i = truth.iter().position(|p| p.0 > at).unwrap();
+    let jump = (truth[i].1 - truth[i - 1].1).hypot(truth[i].2 - truth[i - 1].2);
+    assert!((jump - carry).abs() < 0.2, "truth jumps {jump} m, reported {carry} m");
+    let recovered = l["kidnap"]["recovered_after_s"].as_f64().expect("found again");
+    assert!(recovered <= 5.0, "found after {recovered} s");
+    // Scored against dead reckoning too.
+    let odometry = l["odometry"]["map_mean_m"].as_f64().unwrap();
+    assert!(odometry > 0.0 && l["worst_over_odometry_m"].as_f64().is_some(), "{l}");
+}
+
+#[test]
 fn global_localization_converges_within_ten_seconds() {
     let map = shared_data("linemaps/CVAP7_vector.txt");
     let (dir, cache) = (out_dir("localize-global"), out_dir("localize-global-scenes"));

@@ -8,7 +8,7 @@ use squall_core::eval::map_frame;
 use squall_core::geometry::Pose2;
 use squall_core::trajectory::Trajectory;
 
-use squall_spouts::sim::{Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for};
+use squall_spouts::sim::{Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for, top_speed_for};
 use squall_topology::{Override, TopologySpec};
 
 use super::eval::print_map_frame;
@@ -216,11 +216,18 @@ fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route
         min_m: Kidnap::DEFAULT_MIN_M,
         max_m: Kidnap::DEFAULT_MAX_M,
     });
+    // The laser's simulator drives at the world's top speed, the depth
+    // camera's at the default one (the same indoors).
+    let max_speed = match args.input.as_str() {
+        "laser" => top_speed_for(map),
+        _ => SimConfig::default().max_speed,
+    };
     let config = SimConfig {
         seed: args.seed,
         duration_secs: args.duration,
         range_max: RANGE_MAX,
         beams: 2,
+        max_speed,
         start,
         kidnap,
         ..SimConfig::default()
