@@ -74,10 +74,10 @@ impl Kld {
     }
 
     /// How many particles to draw from `weights` (normalized; slot i at
-    /// `poses[i]`): draws one at a time, keyed by the run seed, the
-    /// reading and the draw, counting the bins they land in, until n(k)
-    /// draws are made, within [min, max].
-    pub fn count(&self, weights: &[Real], poses: &[Pose2], seed: u64, step: u64) -> usize {
+    /// `pose(i)`): draws one at a time, keyed by the run seed, the reading
+    /// and the draw, counting the bins they land in, until n(k) draws are
+    /// made, within [min, max].
+    pub fn count(&self, weights: &[Real], pose: impl Fn(usize) -> Pose2, seed: u64, step: u64) -> usize {
         let mut cumulative = Vec::with_capacity(weights.len());
         let mut sum = 0.0;
         for w in weights {
@@ -91,7 +91,7 @@ impl Kld {
         let mut n = 0;
         while n < self.max {
             let beta = stream_for_step(seed, step, KLD_STREAM + n as u64).random::<Real>() * sum;
-            let p = &poses[cumulative.partition_point(|&c| c < beta).min(weights.len() - 1)];
+            let p = pose(cumulative.partition_point(|&c| c < beta).min(weights.len() - 1));
             let heading = squall_core::geometry::normalize_angle(p.theta);
             bins.insert((
                 (p.x / self.cell).floor() as i64,
@@ -129,20 +129,20 @@ mod tests {
         let weights = vec![1.0 / n as Real; n];
         // Within one bin: the fewest.
         let one: Vec<Pose2> = (0..n).map(|i| Pose2::new(1.1 + 1e-4 * i as Real, 2.2, 0.01)).collect();
-        assert_eq!(k.count(&weights, &one, 1, 1), 50);
+        assert_eq!(k.count(&weights, |i| one[i], 1, 1), 50);
         // Spread over a 40 m × 40 m floor and every heading: the most.
         let spread: Vec<Pose2> =
             (0..n).map(|i| Pose2::new((i % 40) as Real, (i / 40) as Real * 0.8, i as Real * 0.7)).collect();
-        assert_eq!(k.count(&weights, &spread, 1, 1), 2000);
+        assert_eq!(k.count(&weights, |i| spread[i], 1, 1), 2000);
         // Two places: n(2).
         let two: Vec<Pose2> =
             (0..n).map(|i| Pose2::new(if i % 2 == 0 { 0.1 } else { 30.1 }, 0.1, 0.0)).collect();
-        let c = k.count(&weights, &two, 1, 1);
+        let c = k.count(&weights, |i| two[i], 1, 1);
         assert_eq!(c, 67);
         // The weights, not the slots, decide: all weight on one of the two.
         let mut heavy = vec![0.0; n];
         heavy[0] = 1.0;
-        assert_eq!(k.count(&heavy, &spread, 1, 1), 50);
+        assert_eq!(k.count(&heavy, |i| spread[i], 1, 1), 50);
     }
 
     #[test]

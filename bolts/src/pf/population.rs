@@ -128,21 +128,19 @@ impl Population {
         };
         let n = self.len();
         let (weights, neff) = normalize(&self.log_weights, smoothing * self.start_len as Real / n as Real);
+        // The ring draws each slot from its neighbours: it keeps the count.
+        let kld = kld.filter(|_| scheme != Scheme::Ring);
         // A set KLD-sampling sizes grows when the fit drops: the share to
         // redraw is of the most particles it may hold, not of the few a
         // robot already found needs, so a lost robot is searched for with
         // as many draws as a global start.
-        let grown = match kld {
-            Some(k) if share > 0.0 && scheme != Scheme::Ring => {
-                Some(((share * k.max as Real).ceil() as usize).clamp(k.min, k.max))
-            }
-            _ => None,
-        };
+        let grown = kld
+            .filter(|_| share > 0.0)
+            .map(|k| ((share * k.max as Real).ceil() as usize).clamp(k.min, k.max));
         let resampled = neff < threshold * n as Real || grown.is_some();
         let count = match kld {
-            Some(k) if resampled && scheme != Scheme::Ring => {
-                let poses: Vec<Pose2> = reports.iter().map(|r| r.0).collect();
-                k.count(&weights, &poses, self.seed, step).max(grown.unwrap_or(0))
+            Some(k) if resampled => {
+                k.count(&weights, |i| reports[i].0, self.seed, step).max(grown.unwrap_or(0))
             }
             _ => n,
         };
@@ -431,26 +429,26 @@ mod tests {
 
     #[test]
     fn a_lost_set_grows_to_at_least_the_lost_share_of_the_most_particles() {
-        // 50 particles tracking one place, allowed up to 2000.
-        let kld = Some(Kld::new(50, 2000));
         let injection = Some(Injection { alpha_slow: 0.01, alpha_fast: 0.3, min_drop: 0.1, lost_share: 0.5 });
-        let mut p = Population::start(&[at(0.0); 50], 7, 0.0, at(0.0));
-        let correct = |p: &mut Population, step: u64, fit: Real| {
+        // One reading: every particle at one place, all fitting `fit`.
+        let correct = |p: &mut Population, step: u64, fit: Real, kld: Option<Kld>| {
             let n = p.len();
-            let reports = vec![(at(0.0), -1.0); n];
-            let fits = vec![fit; n];
+            let (reports, fits) = (vec![(at(0.0), -1.0); n], vec![fit; n]);
             let mark = (step as f64, at(0.0));
             let scheme = Scheme::LowVariance;
             p.correct(step, mark, &reports, 1.0 / 50.0, 0.5, scheme, injection.map(|i| (i, &fits[..])), kld)
                 .unwrap()
         };
+        // 50 particles tracking one place, allowed up to 2000.
+        let kld = Some(Kld::new(50, 2000));
+        let mut p = Population::start(&[at(0.0); 50], 7, 0.0, at(0.0));
         for step in 1..=20 {
-            let d = correct(&mut p, step, -0.05);
+            let d = correct(&mut p, step, -0.05, kld);
             assert!(d.fresh.is_empty() && p.len() == 50, "tracking stays at 50 ({})", p.len());
         }
         // The first scan after the kidnapping: the fit drops by 2 per
         // point, fast/slow by 0.3 of that, past the dead band.
-        let d = correct(&mut p, 21, -2.05);
+        let d = correct(&mut p, 21, -2.05, kld);
         assert!(d.resampled, "a lost set is resampled to grow");
         assert!(p.len() >= 1000, "grown to half the most particles: {}", p.len());
         let share = d.fresh.len() as Real / p.len() as Real;
@@ -458,35 +456,9 @@ mod tests {
         // Without KLD-sampling the set keeps its size; the share holds.
         let mut fixed = Population::start(&[at(0.0); 50], 7, 0.0, at(0.0));
         for step in 1..=20 {
-            let reports = vec![(at(0.0), -1.0); 50];
-            let fits = vec![-0.05; 50];
-            fixed
-                .correct(
-                    step,
-                    (0.0, at(0.0)),
-                    &reports,
-                    0.02,
-                    0.5,
-                    Scheme::LowVariance,
-                    injection.map(|i| (i, &fits[..])),
-                    None,
-                )
-                .unwrap();
+            correct(&mut fixed, step, -0.05, None);
         }
-        let reports = vec![(at(0.0), -1.0); 50];
-        let fits = vec![-2.05; 50];
-        let d = fixed
-            .correct(
-                21,
-                (0.0, at(0.0)),
-                &reports,
-                0.02,
-                0.5,
-                Scheme::LowVariance,
-                injection.map(|i| (i, &fits[..])),
-                None,
-            )
-            .unwrap();
+        let d = correct(&mut fixed, 21, -2.05, None);
         assert_eq!(fixed.len(), 50);
         assert!(d.fresh.len() >= 15, "about half of 50 redrawn: {}", d.fresh.len());
     }

@@ -601,6 +601,17 @@ mod tests {
         (worst.abs().to_degrees(), driven)
     }
 
+    /// Whether `p` lies within `within` metres of a corridor (edge) of
+    /// `floor`'s roadmap.
+    fn on_corridor(floor: &Floor, p: &Pose2, within: Real) -> bool {
+        floor.edges.iter().any(|&(a, b)| {
+            let (p0, p1) = (floor.nodes[a], floor.nodes[b]);
+            let (dx, dy) = (p1.0 - p0.0, p1.1 - p0.1);
+            let t = (((p.x - p0.0) * dx + (p.y - p0.1) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+            (p0.0 + t * dx - p.x).hypot(p0.1 + t * dy - p.y) < within
+        })
+    }
+
     #[test]
     fn drawn_starts_differ_by_seed_and_lie_on_the_roadmap() {
         let first_pose = |seed: u64, start: Start| {
@@ -620,14 +631,8 @@ mod tests {
         assert_eq!(drawn[0], first_pose(1, Start::Drawn), "the same seed, the same start");
         for (i, p) in drawn.iter().enumerate() {
             // Within a step of a corridor of the roadmap (the first scan
-            // comes after a physics step), heading along it.
-            let on_corridor = floor.edges.iter().any(|&(a, b)| {
-                let (p0, p1) = (floor.nodes[a], floor.nodes[b]);
-                let (dx, dy) = (p1.0 - p0.0, p1.1 - p0.1);
-                let t = (((p.x - p0.0) * dx + (p.y - p0.1) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
-                (p0.0 + t * dx - p.x).hypot(p0.1 + t * dy - p.y) < 0.05
-            });
-            assert!(on_corridor, "seed {}: {p:?}", i + 1);
+            // comes after a physics step).
+            assert!(on_corridor(&floor, p, 0.05), "seed {}: {p:?}", i + 1);
             let far = drawn.iter().filter(|q| q.distance(p) > 2.0).count();
             assert!(far >= 15, "seed {}: starts spread over the floor, {far} of 20 farther than 2 m", i + 1);
         }
@@ -657,8 +662,8 @@ mod tests {
             let (before, after) = (&scans[i - 1], &scans[i]);
             assert!(before.2.distance(&after.2) > carry.distance() - 0.2, "seed {seed}");
             assert!(before.1.distance(&after.1) < 0.1, "seed {seed}: the odometry jumped");
-            // The new place is on the roadmap's corridors.
-            assert!(floor.nodes.iter().any(|n| (n.0 - carry.to.x).hypot(n.1 - carry.to.y) < 10.0));
+            // The new place is on a corridor of the roadmap.
+            assert!(on_corridor(&floor, &carry.to, 1e-9), "seed {seed}: {:?}", carry.to);
             carries.push(carry.to);
         }
         assert!(carries.windows(2).all(|w| w[0] != w[1]), "each seed its own carry");

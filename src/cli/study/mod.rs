@@ -160,11 +160,12 @@ struct Log {
 
 /// Runs `squall study`.
 pub(super) fn study(args: &StudyArgs) -> ExitCode {
+    if args.jobs == Some(0) {
+        eprintln!("error: --jobs must be at least 1");
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let threads = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     if !args.maps.is_empty() {
-        if args.jobs == Some(0) {
-            eprintln!("error: --jobs must be at least 1");
-            return ExitCode::from(EXIT_INVALID);
-        }
         return localization::study(&localization::Plan {
             maps: args.maps.clone(),
             sensors: args.inputs.clone(),
@@ -173,7 +174,7 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
             duration: args.duration,
             kidnap_at: args.kidnap_at,
             overrides: args.overrides.clone(),
-            jobs: args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+            jobs: threads,
             out: args.out.clone(),
         });
     }
@@ -219,7 +220,6 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
         .collect();
     let odometry: Vec<Option<Accuracy>> =
         logs.iter().map(|log| score::odometry(log, args.max_scans)).collect();
-    let threads = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let rows = run_all(&jobs, &logs, &odometry, threads);
 
     let summaries =
@@ -245,9 +245,6 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
 /// folder names differ, their relations parse, the SLAM topology with
 /// these settings is valid, and the output folder is writable.
 fn validate(args: &StudyArgs, simulated: &[worlds::World]) -> Result<Vec<Log>, String> {
-    if args.jobs == Some(0) {
-        return Err("--jobs must be at least 1".into());
-    }
     if args.seeds.0.is_empty() {
         return Err("--seeds gives no seed".into());
     }
