@@ -141,8 +141,90 @@ fn a_panicking_bolt_fails_the_run_naming_it() {
             .contains("error: the run failed: bolt \"relay\" task 0 panicked: injected panic at message 100"),
         "{stderr}"
     );
-    assert!(dir.join("metrics.json").exists(), "metrics are written for a failed run too");
+    // Metrics are written for a failed run too, say so, and add up as
+    // they stood when it failed: every tuple a component emitted was
+    // received downstream or counted lost (three runs: which task
+    // reported last used to vary).
+    for run in 0..3 {
+        if run > 0 {
+            let out = squall(&[
+                "run",
+                "examples/topologies/probe.toml",
+                "--set",
+                "source.params.count=1000",
+                "--set",
+                "relay.params.panic_at=100",
+                "--out",
+                dir.to_str().unwrap(),
+            ]);
+            assert_eq!(out.status.code(), Some(1));
+        }
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+        assert_eq!(metrics["status"], "failed");
+        assert_eq!(metrics["error"], "bolt \"relay\" task 0 panicked: injected panic at message 100");
+        let component = |name: &str| {
+            let c = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
+            let count = |key: &str| c[key].as_u64().unwrap();
+            (count("received"), count("emitted"), count("dropped") + count("undelivered"))
+        };
+        let (source, relay, sink) = (component("source"), component("relay"), component("sink"));
+        assert_eq!(source.1, 1000, "run {run}: {metrics}");
+        assert_eq!(relay.0 + relay.2, source.1, "run {run}: relay (received, emitted, lost) {relay:?}");
+        assert_eq!(relay.0, 100, "run {run}: the tuple that panicked was received");
+        assert_eq!(sink.0 + sink.2, relay.1, "run {run}: sink (received, emitted, lost) {sink:?}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn output_into_a_closed_pipe_ends_quietly_without_a_panic() {
+    // `squall graph … | head -0`: the reader is gone before the first
+    // write (its end of the pipe closed before squall starts).
+    let mut fds = [0; 2];
+    // SAFETY: `pipe` fills both descriptors, each then owned by one File.
+    assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+    let (reader, writer) = unsafe {
+        use std::os::fd::FromRawFd;
+        (std::fs::File::from_raw_fd(fds[0]), std::fs::File::from_raw_fd(fds[1]))
+    };
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["graph", "tests/topologies/feedback.toml"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(writer)
+        .output()
+        .unwrap();
+    let stderr = text(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(141), "{stderr}");
+}
+
+#[test]
+fn negative_numbers_reach_their_own_checks() {
+    let out = squall(&["sim", "--fov-deg", "-5", "--out", "/nonexistent-squall-out"]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("field of view must be in (0°, 360°], got -5°"), "{stderr}");
+    let out = squall(&["slam", "--particles", "-1", "--out", "/nonexistent-squall-out"]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("invalid value '-1' for '--particles"), "{stderr}");
+}
+
+#[test]
+fn an_unwritable_out_is_refused_before_the_run() {
+    // /proc takes no new files, whoever runs the test.
+    for args in [
+        &["run", "examples/topologies/probe.toml", "--out", "/proc/self/squall-out"][..],
+        &["slam", "--out", "/proc/self/squall-out"],
+        &["sim", "--out", "/proc/self/squall-out"],
+    ] {
+        let out = squall(args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains("error: --out /proc/self/squall-out: cannot write there"), "{stderr}");
+    }
 }
 
 #[test]
@@ -177,15 +259,20 @@ fn help_shows_examples() {
     }
 }
 
-/// Whether process `pid` has installed a handler for SIGINT (bit 2 of the
-/// caught-signals mask in Linux's /proc/PID/status).
-fn catches_sigint(pid: u32) -> bool {
+/// Whether process `pid` has installed a handler for signal `number`
+/// (its bit in the caught-signals mask of Linux's /proc/PID/status).
+fn catches(pid: u32, number: u32) -> bool {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
     status
         .lines()
         .find_map(|l| l.strip_prefix("SigCgt:"))
         .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
-        .is_some_and(|mask| mask & (1 << (2 - 1)) != 0)
+        .is_some_and(|mask| mask & (1 << (number - 1)) != 0)
+}
+
+/// Whether process `pid` handles SIGINT (2).
+fn catches_sigint(pid: u32) -> bool {
+    catches(pid, 2)
 }
 
 #[test]
@@ -214,7 +301,7 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     let out = finish_within(child, limit, stderr);
     let stderr = stderr();
     assert!(out.status.success(), "{stderr}");
-    assert!(stderr.contains("stopped early by Ctrl-C"), "{stderr}");
+    assert!(stderr.contains("stopping on Ctrl-C") && stderr.contains("stopped early"), "{stderr}");
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let component = |name: &str| {
@@ -233,6 +320,63 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     assert!(text(&out.stdout).starts_with("topology \"probe\""), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(&log);
+}
+
+#[test]
+fn sigterm_stops_a_replay_sleeping_until_its_next_record_and_the_run_finishes() {
+    let dir = out_dir("sigterm");
+    std::fs::create_dir_all(&dir).unwrap();
+    // Replayed in real time, the second record is due in ten million
+    // seconds (115 days): only the stop can end the wait.
+    let log = dir.join("gap.clf");
+    std::fs::write(&log, "ODOM 0 0 0 0 0 0 1.0 h 1.0\nODOM 1 0 0 0 0 0 10000001.0 h 10000001.0\n").unwrap();
+    let stderr_file = dir.join("stderr");
+    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args([
+            "run",
+            "examples/topologies/replay.toml",
+            "--set",
+            &format!("source.params.log={}", log.display()),
+        ])
+        .args(["--set", "source.params.rate=1", "--out", dir.join("out").to_str().unwrap()])
+        .env("SQUALL_LOG", LOG_PROGRESS)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(&stderr_file).unwrap())
+        .spawn()
+        .unwrap();
+    let stderr = || std::fs::read_to_string(&stderr_file).unwrap_or_default();
+    let limit = Duration::from_secs(60);
+    wait_for("the SIGTERM handler", limit, || catches(child.id(), 15), stderr);
+    wait_for("the first record", limit, || logged_progress(&stderr()).is_some_and(|n| n >= 1), stderr);
+    let killed = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let out = finish_within(child, limit, stderr);
+    let stderr = stderr();
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("stopping on SIGTERM"), "{stderr}");
+    assert!(!stderr.contains('\x1b'), "log lines into a file carry no colour codes: {stderr:?}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["status"], "stopped", "{metrics}");
+    assert_eq!(metrics["components"][1]["custom"]["tuples.source.odom"], 1, "{metrics}");
+
+    // A stamp whose wait cannot be timed at all fails the run naming its
+    // line; it used to panic.
+    std::fs::write(&log, "ODOM 0 0 0 0 0 0 1.0 h 1.0\nODOM 1 0 0 0 0 0 1e300 h 1e300\n").unwrap();
+    let out = squall(&[
+        "run",
+        "examples/topologies/replay.toml",
+        "--set",
+        &format!("source.params.log={}", log.display()),
+        "--set",
+        "source.params.rate=1",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let expected = format!("{}:2: stamp 1e300 lies", log.display());
+    assert!(text(&out.stderr).contains(&expected), "{}", text(&out.stderr));
+    assert!(!text(&out.stderr).contains("panicked"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -380,6 +524,49 @@ fn log_and_bag_sources_run_in_a_topology() {
         squall(&["run", "examples/topologies/replay.toml", "--set", "source.params.log=/nonexistent.clf"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(text(&out.stderr).contains("/nonexistent.clf: cannot open"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn slam_without_scans_fails_saying_why_instead_of_succeeding_empty() {
+    let dir = out_dir("no-scans");
+    std::fs::create_dir_all(&dir).unwrap();
+    let odometry_only: String = std::fs::read_to_string(shared_data("laser/aces.clf"))
+        .unwrap()
+        .lines()
+        .filter(|l| l.starts_with("ODOM"))
+        .take(50)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    for (name, content) in [("empty.clf", String::new()), ("odometry.clf", odometry_only)] {
+        let log = dir.join(name);
+        std::fs::write(&log, content).unwrap();
+        let out =
+            squall(&["slam", "--log", log.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {stderr}");
+        assert!(stderr.contains("no reading arrived, so nothing was estimated"), "{name}: {stderr}");
+    }
+    // A log that cannot be read is refused before the run.
+    let out = squall(&["slam", "--log", "/nonexistent.clf", "--out", dir.join("out").to_str().unwrap()]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("--log /nonexistent.clf: cannot read: No such file"), "{stderr}");
+    // A misspelled topic names itself and the topics the bag has.
+    let bag = shared_data("rosbag2/aces");
+    let out = squall(&[
+        "slam",
+        "--log",
+        &bag,
+        "--set",
+        "source.params.scan_topic=\"/scna\"",
+        "--out",
+        dir.join("out").to_str().unwrap(),
+    ]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("no messages on scan_topic \"/scna\"; the bag's topics: "), "{stderr}");
+    assert!(stderr.contains("/scan (sensor_msgs/msg/LaserScan)"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -604,6 +791,75 @@ fn slam_on_the_simulator_and_its_argument_checks() {
     let out = squall(&["slam", "--cutoff", "fast", "--out", dir.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("cutoff"), "{}", text(&out.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A copy of the first `scans` front scans of the ACES log (with the
+/// odometry between them), every pose after the `jump_after`-th scan moved
+/// `jump` metres along x: a log whose odometry jumps.
+fn aces_with_a_jump(path: &std::path::Path, scans: usize, jump_after: usize, jump: f64) {
+    let log = std::fs::read_to_string(shared_data("laser/aces.clf")).unwrap();
+    let (mut seen, mut out) = (0, String::new());
+    for line in log.lines() {
+        let mut fields: Vec<String> = line.split_whitespace().map(str::to_string).collect();
+        let moved = seen >= jump_after;
+        match fields.first().map(String::as_str) {
+            Some("FLASER") => {
+                if seen == scans {
+                    break;
+                }
+                seen += 1;
+                // FLASER n r1..rn x y θ odom_x odom_y odom_θ …
+                let n: usize = fields[1].parse().unwrap();
+                if moved {
+                    for k in [2 + n, 2 + n + 3] {
+                        fields[k] = (fields[k].parse::<f64>().unwrap() + jump).to_string();
+                    }
+                }
+            }
+            Some("ODOM") if moved => fields[1] = (fields[1].parse::<f64>().unwrap() + jump).to_string(),
+            _ => {}
+        }
+        out.push_str(&fields.join(" "));
+        out.push('\n');
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn a_map_that_would_outgrow_its_bound_is_an_error_not_an_abort() {
+    let dir = out_dir("slam-bound");
+    std::fs::create_dir_all(&dir).unwrap();
+    // Odometry that jumps a billion metres after scan 100 used to grow
+    // every particle's map until the allocation of 49 PB failed (abort).
+    let log = dir.join("jump.clf");
+    aces_with_a_jump(&log, 150, 100, 1e9);
+    let out = squall(&["slam", "--log", log.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("would pass its bound of 2000 m a side (max_map_m)"), "{stderr}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["status"], "failed", "{metrics}");
+    // A jump the bound holds (500 m) is mapped.
+    aces_with_a_jump(&log, 150, 100, 500.0);
+    let bounded =
+        squall(&["slam", "--log", log.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+    assert!(bounded.status.success(), "{}", text(&bounded.stderr));
+    // Cells so small that the bound's index alone would take terabytes
+    // are refused before the run.
+    let out = squall(&[
+        "slam",
+        "--log",
+        log.to_str().unwrap(),
+        "--set",
+        "matcher.params.delta=1e-9",
+        "--out",
+        dir.join("out").to_str().unwrap(),
+    ]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("raise delta or lower max_map_m"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

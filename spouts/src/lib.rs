@@ -6,6 +6,7 @@ pub mod depth;
 mod error;
 #[cfg(feature = "cluster")]
 pub mod live;
+pub mod pace;
 pub mod rosbag2;
 pub mod sim;
 

@@ -70,19 +70,19 @@ pub(super) fn eval(args: &EvalArgs) -> ExitCode {
                 if args.ground_truth.is_some() {
                     obj.insert("frame".into(), frame.name().into());
                 }
-                println!("{}", serde_json::Value::Object(obj));
+                outln!("{}", serde_json::Value::Object(obj));
             } else {
-                println!("trajectory: {} ({} poses)", args.trajectory.display(), trajectory.len());
+                outln!("trajectory: {} ({} poses)", args.trajectory.display(), trajectory.len());
                 if let Some(r) = rel {
-                    println!("relations: {} of {} matched", r.matched, r.total);
-                    println!("  translational error: {:.4} ± {:.4} m", r.trans_mean, r.trans_std);
-                    println!("  rotational error:    {:.3} ± {:.3} deg", r.rot_mean_deg, r.rot_std_deg);
+                    outln!("relations: {} of {} matched", r.matched, r.total);
+                    outln!("  translational error: {:.4} ± {:.4} m", r.trans_mean, r.trans_std);
+                    outln!("  rotational error:    {:.3} ± {:.3} deg", r.rot_mean_deg, r.rot_std_deg);
                     for span in r.by_span.iter().filter(|s| s.matched > 0) {
                         let spans = match span.to_secs {
                             Some(to) => format!("{}–{to} s", span.from_secs),
                             None => format!("{} s or more", span.from_secs),
                         };
-                        println!(
+                        outln!(
                             "  spanning {spans}: {} relations, {:.4} m ({:.0}% of the summed error)",
                             span.matched,
                             span.trans_mean,
@@ -92,14 +92,16 @@ pub(super) fn eval(args: &EvalArgs) -> ExitCode {
                 }
                 match truth {
                     Some(TruthScore::Aligned(g)) => {
-                        println!("ground truth: {} poses matched, compared after alignment", g.pairs);
-                        println!(
+                        outln!("ground truth: {} poses matched, compared after alignment", g.pairs);
+                        outln!(
                             "  ATE: {:.4} m RMSE, {:.3} deg mean heading error",
-                            g.ate_rmse, g.ate_rot_mean_deg
+                            g.ate_rmse,
+                            g.ate_rot_mean_deg
                         );
-                        println!(
+                        outln!(
                             "  RPE: {:.4} m, {:.3} deg RMSE (consecutive poses)",
-                            g.rpe_trans_rmse, g.rpe_rot_rmse_deg
+                            g.rpe_trans_rmse,
+                            g.rpe_rot_rmse_deg
                         );
                     }
                     Some(TruthScore::Map(m)) => print_map_frame(&m, args.frame.is_none()),
@@ -136,13 +138,13 @@ impl Frame {
 /// Prints a map-frame score; `declared`: the frame came from the file.
 pub(super) fn print_map_frame(m: &MapFrameScore, declared: bool) {
     let why = if declared { " (the trajectory declares its frame)" } else { "" };
-    println!("ground truth: {} poses matched, compared in the map frame, no alignment{why}", m.pairs);
-    println!("  position error: {:.4} m mean, {:.4} m max", m.map_mean_m, m.map_max_m);
-    println!("  heading error:  {:.3} deg mean, {:.3} deg max", m.map_rot_mean_deg, m.map_rot_max_deg);
-    println!("  within {WITHIN_M} m and {WITHIN_DEG} deg: {:.1}% of the poses", 100.0 * m.map_within_share);
+    outln!("ground truth: {} poses matched, compared in the map frame, no alignment{why}", m.pairs);
+    outln!("  position error: {:.4} m mean, {:.4} m max", m.map_mean_m, m.map_max_m);
+    outln!("  heading error:  {:.3} deg mean, {:.3} deg max", m.map_rot_mean_deg, m.map_rot_max_deg);
+    outln!("  within {WITHIN_M} m and {WITHIN_DEG} deg: {:.1}% of the poses", 100.0 * m.map_within_share);
     match m.converged_after_s {
-        Some(t) => println!("  converged after {t:.2} s and stayed"),
-        None => println!("  not converged: the last pose is off"),
+        Some(t) => outln!("  converged after {t:.2} s and stayed"),
+        None => outln!("  not converged: the last pose is off"),
     }
 }
 

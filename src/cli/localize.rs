@@ -147,14 +147,14 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
         format!("matcher.params.resampling={}", quoted(scheme)),
     ]);
     let route = simulated_route(&map, start, args)?;
-    // Augmented MCL (in localize.toml) redraws particles where one
-    // reading fits: a laser scan narrows that to a few places, a depth
-    // frame's 55° view of the walls within 3.5 m to too many, and the
-    // redrawn particles then pull a well-tracked robot to look-alike
-    // places (docs/decisions/0019-kidnapping-recovery.md). Off for depth.
-    let laser = args.input == "laser";
-    if !laser {
-        sets.push("matcher.params.injection=false".into());
+    // Augmented MCL (in localize.toml) redraws particles where the
+    // reading fits once the fit drops: with either sensor, so that a
+    // kidnapped robot, or a global start that settled on a look-alike, is
+    // searched for. A person or a box can fill the depth camera's view:
+    // what lies short of the map does not count against the fit there
+    // (docs/decisions/0020-depth-recovery-and-occlusion.md).
+    if args.input == "depth" {
+        sets.push("matcher.params.occlusion_fits=true".into());
     }
     match args.init.as_str() {
         "global" => {
@@ -170,8 +170,7 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
             // injection is on.
             let (most, fewest) = match args.particles {
                 Some(n) => (n, n),
-                None if laser => (GLOBAL_PARTICLES, TRACKING_PARTICLES),
-                None => (TRACKING_PARTICLES, TRACKING_PARTICLES),
+                None => (GLOBAL_PARTICLES, TRACKING_PARTICLES),
             };
             sets.push(format!("matcher.params.particles={most}"));
             sets.push(format!("matcher.params.min_particles={fewest}"));
@@ -292,9 +291,10 @@ fn score(dir: &Path, route: &Route) -> Result<(&'static str, serde_json::Value),
         map_frame::score(&route.odometry, &truth),
         map_frame::worst_excess(&estimate, &route.odometry, &truth),
     ) {
-        println!(
+        outln!(
             "  raw odometry: {:.4} m mean, {:.4} m max; the estimate at most {worst:.4} m worse than it",
-            odometry.map_mean_m, odometry.map_max_m
+            odometry.map_mean_m,
+            odometry.map_max_m
         );
         value["odometry"] =
             serde_json::json!({ "map_mean_m": odometry.map_mean_m, "map_max_m": odometry.map_max_m });
@@ -303,13 +303,13 @@ fn score(dir: &Path, route: &Route) -> Result<(&'static str, serde_json::Value),
     if let Some(c) = route.carry {
         let recovered = map_frame::recovered_after(&estimate, &truth, c.stamp);
         match recovered {
-            Some(t) => println!(
+            Some(t) => outln!(
                 "  kidnapped at {:.1} s, carried {:.1} m: found again {t:.2} s later",
                 c.stamp,
                 c.distance()
             ),
             None => {
-                println!("  kidnapped at {:.1} s, carried {:.1} m: not found again", c.stamp, c.distance())
+                outln!("  kidnapped at {:.1} s, carried {:.1} m: not found again", c.stamp, c.distance())
             }
         }
         value["kidnap"] = serde_json::json!({

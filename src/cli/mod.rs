@@ -1,5 +1,22 @@
 //! Argument parsing and the subcommands.
 
+/// `print!` to stdout that does not panic when the reader has gone
+/// (`squall graph big.toml | head -1`): the process ends quietly, with the
+/// status a shell gives a command killed by SIGPIPE (128 + 13).
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!($($arg)*), false)
+    };
+}
+
+/// `println!` to stdout, ending quietly when the reader has gone (see
+/// `out!`).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!($($arg)*), true)
+    };
+}
+
 mod eval;
 mod localize;
 mod progress;
@@ -18,7 +35,7 @@ mod worker;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use squall_topology::spec::SpecErrors;
 use squall_topology::{Override, Topology, TopologySpec};
 
@@ -124,7 +141,7 @@ enum Command {
 /// Parses arguments, runs the command, maps errors to exit codes.
 pub(crate) fn main() -> ExitCode {
     init_logging();
-    let cli = match Cli::try_parse() {
+    let cli = match parse_args() {
         Ok(cli) => cli,
         Err(e) => {
             let _ = e.print();
@@ -139,7 +156,7 @@ pub(crate) fn main() -> ExitCode {
         Command::Validate { topology } => match load(&topology) {
             Ok(t) => {
                 let tasks: usize = t.spec().components.iter().map(|c| c.parallelism).sum();
-                println!(
+                outln!(
                     "{}: topology \"{}\" is valid ({} components, {tasks} tasks)",
                     topology.file.display(),
                     t.name(),
@@ -151,7 +168,7 @@ pub(crate) fn main() -> ExitCode {
         },
         Command::Graph { topology } => match load(&topology) {
             Ok(t) => {
-                print!("{}", squall_topology::graph::to_dot(&t));
+                out!("{}", squall_topology::graph::to_dot(&t));
                 ExitCode::SUCCESS
             }
             Err(code) => code,
@@ -168,13 +185,13 @@ pub(crate) fn main() -> ExitCode {
         Command::Robot(args) => robot::robot(&args),
         Command::Kinds => {
             let registry = squall::builtin::registry();
-            println!("spouts:");
+            outln!("spouts:");
             for k in registry.spout_kinds() {
-                println!("  {k}");
+                outln!("  {k}");
             }
-            println!("bolts:");
+            outln!("bolts:");
             for k in registry.bolt_kinds() {
-                println!("  {k}");
+                outln!("  {k}");
             }
             ExitCode::SUCCESS
         }
@@ -203,11 +220,46 @@ fn report_invalid(spec: Result<TopologySpec, SpecErrors>) -> Result<Topology, Ex
     })
 }
 
+/// Parses the command line. Every option takes negative numbers as
+/// values, so that `--particles -1` is refused by its own check ("must be
+/// at least 1") rather than read as an unknown flag `-1`.
+fn parse_args() -> Result<Cli, clap::Error> {
+    fn negatives(command: clap::Command) -> clap::Command {
+        command.mut_args(|a| a.allow_negative_numbers(true)).mut_subcommands(negatives)
+    }
+    let matches = negatives(Cli::command()).try_get_matches()?;
+    Cli::from_arg_matches(&matches)
+}
+
+/// Writes to stdout for `out!` and `outln!`. A closed pipe ends the
+/// process at once with status 141; any other error is reported and ends
+/// it with status 1: output the user asked for could not be written.
+pub(crate) fn write_stdout(args: std::fmt::Arguments<'_>, newline: bool) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    let written =
+        stdout.write_fmt(args).and_then(|()| if newline { stdout.write_all(b"\n") } else { Ok(()) });
+    match written.and_then(|()| stdout.flush()) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(141),
+        Err(e) => {
+            eprintln!("error: cannot write to stdout: {e}");
+            std::process::exit(i32::from(EXIT_FAILED));
+        }
+    }
+}
+
 fn init_logging() {
     // zenoh warns at every start that its scouting delay elapsed, although
     // squall connects to explicit endpoints and does not scout.
     let filter = tracing_subscriber::EnvFilter::try_from_env("SQUALL_LOG").unwrap_or_else(|_| {
         tracing_subscriber::EnvFilter::new("warn,zenoh::net::runtime::orchestrator=error")
     });
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    // Colours only for a person at a terminal, not into a log file or pipe.
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(ansi)
+        .with_writer(std::io::stderr)
+        .try_init();
 }

@@ -174,13 +174,13 @@ async fn play(
     latencies.sort_by(f64::total_cmp);
     let at =
         |q: f64| latencies.get(((answered as f64 - 1.0) * q).round() as usize).copied().unwrap_or(f64::NAN);
-    println!("scans sent: {}", scans.len());
-    println!("poses received: {answered}");
-    println!("readings without a pose: {}", scans.len() - answered.min(scans.len()));
-    println!("round trip ms: p50 {:.1}, p90 {:.1}, max {:.1}", at(0.5), at(0.9), at(1.0));
-    println!("maps received: {map_count} (the last {map_bytes} bytes)");
+    outln!("scans sent: {}", scans.len());
+    outln!("poses received: {answered}");
+    outln!("readings without a pose: {}", scans.len() - answered.min(scans.len()));
+    outln!("round trip ms: p50 {:.1}, p90 {:.1}, max {:.1}", at(0.5), at(0.9), at(1.0));
+    outln!("maps received: {map_count} (the last {map_bytes} bytes)");
     if malformed > 0 {
-        println!("poses not matching a scan sent: {malformed}");
+        outln!("poses not matching a scan sent: {malformed}");
     }
     Ok(())
 }

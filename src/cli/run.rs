@@ -3,10 +3,9 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
-use squall_topology::fsio::write_atomic;
-use squall_topology::{Progress, RunError, RunOptions, RunReport, Topology};
+use squall_topology::fsio::{check_writable_dir, write_atomic};
+use squall_topology::{Progress, RunError, RunOptions, RunReport, StopRequest, Topology};
 
 use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay};
 
@@ -34,6 +33,12 @@ pub(super) fn run_scored(
     cluster: Option<&Path>,
     scorer: Option<Scorer>,
 ) -> ExitCode {
+    if let Some(dir) = &out
+        && let Err(e) = check_writable_dir(dir)
+    {
+        eprintln!("error: --out {}: cannot write there: {e}", dir.display());
+        return ExitCode::from(EXIT_INVALID);
+    }
     let progress = Arc::new(Progress::default());
     let options =
         RunOptions { out_dir: out.clone(), progress: Some(progress.clone()), ..RunOptions::default() };
@@ -53,8 +58,8 @@ pub(super) fn run_scored(
             }
         },
     };
-    if options.stop.load(Ordering::Relaxed) {
-        eprintln!("note: stopped early by Ctrl-C; everything already emitted was processed");
+    if options.stop.is_made() {
+        eprintln!("note: stopped early (Ctrl-C or SIGTERM); everything already emitted was processed");
     }
     let (report, failure) = match result {
         Ok(report) => (report, None),
@@ -67,7 +72,7 @@ pub(super) fn run_scored(
         }
     };
     if !quiet {
-        print!("{report}");
+        out!("{report}");
     }
     let mut code = ExitCode::SUCCESS;
     let score = match (&out, scorer, &failure) {
@@ -81,8 +86,13 @@ pub(super) fn run_scored(
         },
         _ => None,
     };
+    let status = match (&failure, options.stop.is_made()) {
+        (Some(message), _) => Status::Failed(message.clone()),
+        (None, true) => Status::Stopped,
+        (None, false) => Status::Completed,
+    };
     if let Some(dir) = &out {
-        if let Err(e) = write_metrics(dir, &report, score) {
+        if let Err(e) = write_metrics(dir, &report, score, &status) {
             eprintln!("error: cannot write {}: {e}", dir.join("metrics.json").display());
             code = ExitCode::from(EXIT_FAILED);
         }
@@ -129,43 +139,81 @@ fn on_cluster(
     ))
 }
 
-/// Writes metrics.json: the run's report, with `score` added under its key.
+/// How a run ended, as metrics.json's `status` says: `completed` (the
+/// sources ended and everything was processed), `stopped` (Ctrl-C or
+/// SIGTERM: the sources were stopped early, everything they had sent was
+/// processed) or `failed` (with `error`: the counters are as they stood
+/// when the run was abandoned).
+enum Status {
+    Completed,
+    Stopped,
+    Failed(String),
+}
+
+/// Writes metrics.json: the run's report, its status, and `score` under
+/// its key.
 fn write_metrics(
     dir: &std::path::Path,
     report: &RunReport,
     score: Option<(&'static str, serde_json::Value)>,
+    status: &Status,
 ) -> std::io::Result<()> {
-    let json = match score {
-        None => report.to_json(),
-        Some((key, value)) => {
-            let mut all = serde_json::to_value(report).map_err(std::io::Error::other)?;
-            if let Some(fields) = all.as_object_mut() {
-                fields.insert(key.to_string(), value);
-            }
-            serde_json::to_string_pretty(&all).map_err(std::io::Error::other)?
+    let mut all = serde_json::to_value(report).map_err(std::io::Error::other)?;
+    if let Some(fields) = all.as_object_mut() {
+        let (name, error) = match status {
+            Status::Completed => ("completed", None),
+            Status::Stopped => ("stopped", None),
+            Status::Failed(message) => ("failed", Some(message)),
+        };
+        fields.insert("status".into(), name.into());
+        if let Some(error) = error {
+            fields.insert("error".into(), error.as_str().into());
         }
-    };
+        if let Some((key, value)) = score {
+            fields.insert(key.to_string(), value);
+        }
+    }
+    let json = serde_json::to_string_pretty(&all).map_err(std::io::Error::other)?;
     write_atomic(&dir.join("metrics.json"), json.as_bytes())
 }
 
-/// First Ctrl-C: stop the spouts and let the run drain and finish. Second:
-/// exit at once.
-fn stop_on_ctrl_c(stop: Arc<AtomicBool>) {
+/// First Ctrl-C or SIGTERM (how containers and service managers stop a
+/// process): stop the spouts and let the run drain and finish, metrics
+/// and outputs written. Second: exit at once.
+fn stop_on_ctrl_c(stop: Arc<StopRequest>) {
     let spawned = std::thread::Builder::new().name("ctrl-c".into()).spawn(move || {
         let Ok(rt) = tokio::runtime::Builder::new_current_thread().enable_all().build() else { return };
         rt.block_on(async {
-            if tokio::signal::ctrl_c().await.is_err() {
-                return;
-            }
-            eprintln!("\nstopping: draining tuples in flight (Ctrl-C again to abort)");
-            stop.store(true, Ordering::Relaxed);
-            if tokio::signal::ctrl_c().await.is_ok() {
-                eprintln!("aborted");
+            let Some(name) = stop_signal().await else { return };
+            eprintln!("\nstopping on {name}: draining tuples in flight (Ctrl-C again to abort)");
+            stop.request();
+            if let Some(name) = stop_signal().await {
+                eprintln!("aborted on {name}");
                 std::process::exit(130);
             }
         });
     });
     if let Err(e) = spawned {
         tracing::warn!("cannot watch for Ctrl-C: {e}");
+    }
+}
+
+/// The next Ctrl-C or SIGTERM, by name; `None` when neither can be
+/// watched.
+async fn stop_signal() -> Option<&'static str> {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => tokio::select! {
+                r = tokio::signal::ctrl_c() => r.ok().map(|()| "Ctrl-C"),
+                _ = term.recv() => Some("SIGTERM"),
+            },
+            Err(_) => tokio::signal::ctrl_c().await.ok().map(|()| "Ctrl-C"),
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        tokio::signal::ctrl_c().await.ok().map(|()| "Ctrl-C")
     }
 }

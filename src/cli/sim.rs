@@ -72,9 +72,13 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
+    if let Err(e) = squall_topology::fsio::check_writable_dir(&args.out) {
+        eprintln!("error: --out {}: cannot write there: {e}", args.out.display());
+        return ExitCode::from(EXIT_INVALID);
+    }
     match write_run(sim, &args.out) {
         Ok(s) => {
-            println!(
+            outln!(
                 "simulated {:.0} s in {:.2} s: {} scans, {} local and {} loop relations in {}",
                 args.duration,
                 started.elapsed().as_secs_f64(),

@@ -64,6 +64,15 @@ fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
             }
         }
         Some(path) => {
+            // Read here, before the run, unless workers elsewhere read it.
+            if args.cluster.is_none() {
+                let readable = match std::fs::metadata(path) {
+                    Ok(m) if m.is_dir() => std::fs::read_dir(path).map(drop),
+                    Ok(_) => std::fs::File::open(path).map(drop),
+                    Err(e) => Err(e),
+                };
+                readable.map_err(|e| format!("--log {}: cannot read: {e}", path.display()))?;
+            }
             let name = path.to_string_lossy();
             let is_carmen = name.ends_with(".clf") || name.ends_with(".clf.gz") || name.ends_with(".gz");
             let (kind, key) = if is_carmen { ("carmen", "log") } else { ("rosbag2", "bag") };

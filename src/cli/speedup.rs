@@ -120,6 +120,10 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
         eprintln!("error: --particles and --matchers need at least one value each, matchers ≥ 1");
         return ExitCode::from(EXIT_INVALID);
     }
+    if let Err(e) = squall_topology::fsio::check_writable_dir(&args.out) {
+        eprintln!("error: --out {}: cannot write there: {e}", args.out.display());
+        return ExitCode::from(EXIT_INVALID);
+    }
     let mut matchers = args.matchers.clone();
     matchers.sort_unstable();
     matchers.dedup();
@@ -151,7 +155,7 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
         }
     }
     let table = table(&rows, matchers[0]);
-    print!("{table}");
+    out!("{table}");
     let written = write_atomic(&args.out.join("speedup.csv"), csv(&rows, matchers[0]).as_bytes())
         .and_then(|()| write_atomic(&args.out.join("speedup.svg"), svg(&rows, matchers[0]).as_bytes()));
     if let Err(e) = written {

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-use crate::runtime::Progress;
+use crate::runtime::{Progress, StopRequest};
 
 /// The identity and environment of one task, given to `open`/`prepare`.
 #[derive(Debug, Clone)]
@@ -17,6 +17,7 @@ pub struct TaskContext {
     pub(crate) out_dir: Option<Arc<PathBuf>>,
     pub(crate) progress: Option<Arc<Progress>>,
     pub(crate) replacement: bool,
+    pub(crate) stop: Arc<StopRequest>,
 }
 
 impl TaskContext {
@@ -56,6 +57,13 @@ impl TaskContext {
     /// The run's output directory, when one was given.
     pub fn out_dir(&self) -> Option<&Path> {
         self.out_dir.as_deref().map(|p| p.as_path())
+    }
+
+    /// The run's stop request: a spout that waits inside `next` (pacing a
+    /// replay) keeps it from `open` and waits on it beside its timer, then
+    /// returns without emitting; the runtime stops polling it.
+    pub fn stop(&self) -> Arc<StopRequest> {
+        self.stop.clone()
     }
 
     /// Tells the progress display how many tuples this task will emit in

@@ -23,7 +23,9 @@ pub fn write_atomic_with<E: From<io::Error>>(
     let name = path
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
-    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
+    let prefix = format!(".{}.tmp", name.to_string_lossy());
+    remove_stale(dir, &prefix);
+    let tmp = dir.join(format!("{prefix}{}", std::process::id()));
     let result = (|| {
         let mut out = io::BufWriter::new(fs::File::create(&tmp)?);
         write(&mut out)?;
@@ -36,6 +38,35 @@ pub fn write_atomic_with<E: From<io::Error>>(
         let _ = fs::remove_file(&tmp);
     }
     result
+}
+
+/// Removes the temporary files `prefix<pid>` in `dir` that a process no
+/// longer running left behind (killed between creating and renaming
+/// one). Where processes cannot be looked up (no `/proc`), nothing.
+fn remove_stale(dir: &Path, prefix: &str) {
+    let proc_fs = Path::new("/proc");
+    if !proc_fs.join("self").exists() {
+        return;
+    }
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let file = entry.file_name();
+        let Some(pid) = file.to_str().and_then(|f| f.strip_prefix(prefix)) else { continue };
+        let ours = pid == std::process::id().to_string();
+        if pid.parse::<u32>().is_ok() && !ours && !proc_fs.join(pid).exists() {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// Checks before a run that outputs can be written into `dir` (created
+/// if missing): creates and removes a file there, so that a read-only or
+/// missing place is found before hours of work, not after.
+pub fn check_writable_dir(dir: &Path) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    let probe = dir.join(format!(".squall-write-check.tmp{}", std::process::id()));
+    fs::File::create(&probe)?;
+    fs::remove_file(&probe)
 }
 
 #[cfg(test)]
@@ -52,6 +83,26 @@ mod tests {
         let names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names.len(), 1, "{names:?}");
         fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_temp_file_left_by_a_killed_process_is_removed_at_the_next_write() {
+        let dir = std::env::temp_dir().join(format!("squall-fsio-stale-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        // No process has this pid (past any kernel's pid_max); pid 1 runs.
+        let dead = dir.join(".map.pgm.tmp999999999");
+        let live = dir.join(".map.pgm.tmp1");
+        fs::write(&dead, b"half").unwrap();
+        fs::write(&live, b"being written").unwrap();
+        write_atomic(&dir.join("map.pgm"), b"map").unwrap();
+        assert!(!dead.exists(), "the dead process's temp file is removed");
+        assert!(live.exists(), "a running process's temp file is left alone");
+        check_writable_dir(&dir).unwrap();
+        let mut names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        names.sort();
+        assert_eq!(names, [".map.pgm.tmp1", "map.pgm"], "the write check leaves nothing");
+        fs::remove_dir_all(&dir).unwrap();
+        assert!(check_writable_dir(Path::new("/proc/self/squall-out")).is_err());
     }
 
     #[test]

@@ -49,6 +49,6 @@ pub use params::Params;
 pub use plan::Topology;
 pub use registry::Registry;
 pub use runtime::emitter::Emitter;
-pub use runtime::{Progress, RunError, RunOptions, run};
+pub use runtime::{Progress, RunError, RunOptions, StopRequest, run};
 pub use spec::{Override, OverrideError, TopologySpec};
 pub use tuple::{Source, Tuple};

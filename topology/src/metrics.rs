@@ -162,7 +162,8 @@ pub(crate) fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<St
 pub struct TaskReport {
     /// Task index.
     pub task: usize,
-    /// Tuples executed (bolts).
+    /// Tuples handed to `execute` (bolts), one that panicked or failed
+    /// included.
     pub received: u64,
     /// Emit calls.
     pub emitted: u64,
@@ -204,7 +205,7 @@ pub struct ComponentReport {
     pub role: Role,
     /// Parallelism.
     pub tasks: usize,
-    /// Tuples executed.
+    /// Tuples handed to `execute`, over its tasks.
     pub received: u64,
     /// Emit calls.
     pub emitted: u64,

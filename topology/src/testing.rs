@@ -159,6 +159,7 @@ impl<B: Bolt> BoltHarness<B> {
             out_dir: None,
             progress: None,
             replacement: false,
+            stop: Default::default(),
         };
         let runtime =
             tokio::runtime::Builder::new_current_thread().enable_time().build().expect("a tokio runtime");

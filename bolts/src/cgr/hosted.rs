@@ -71,6 +71,9 @@ struct CgrParams {
     range: Real,
     refine_iterations: u32,
     outlier_sigmas: Real,
+    /// Points short of the map count as fitting in augmented MCL's test
+    /// for a lost robot (a depth camera's view filled by a person).
+    occlusion_fits: bool,
     /// Augmented MCL (random particles when observations stop fitting):
     /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`,
     /// `min_drop` and `lost_share`.
@@ -115,6 +118,7 @@ impl Default for CgrParams {
             range: c.range,
             refine_iterations: c.refine_iterations,
             outlier_sigmas: c.outlier_sigmas,
+            occlusion_fits: c.occlusion_fits,
             injection: o.injection.is_some(),
             alpha_slow: injection.alpha_slow,
             alpha_fast: injection.alpha_fast,
@@ -177,6 +181,7 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
         range: p.range,
         refine_iterations: p.refine_iterations,
         outlier_sigmas: p.outlier_sigmas,
+        occlusion_fits: p.occlusion_fits,
     };
     cgr.check()?;
     crate::error::positive("cell", p.cell)?;

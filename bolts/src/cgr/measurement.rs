@@ -37,6 +37,13 @@ pub struct CgrOptions {
     /// nothing are not better than poses that explain something badly
     /// (which matters when the particles start anywhere). The default is 3.
     pub outlier_sigmas: Real,
+    /// In the test for a lost robot (augmented MCL's fit, not the
+    /// weights), count the points short of the map (in front of walls:
+    /// people, boxes) as fitting. For a depth camera, whose narrow view a
+    /// person or a box a metre away fills; not for a 180° laser, which such
+    /// things hide only in part, and whose points short of the walls it
+    /// expects are how a kidnapping shows. The default is false.
+    pub occlusion_fits: bool,
 }
 
 impl Default for CgrOptions {
@@ -48,11 +55,18 @@ impl Default for CgrOptions {
             range: 8.0,
             refine_iterations: 3,
             outlier_sigmas: 3.0,
+            occlusion_fits: false,
         }
     }
 }
 
 impl CgrOptions {
+    /// What an outlier adds to the log-likelihood: a point
+    /// `outlier_sigmas` σ off, counted 1/f.
+    pub fn outlier_log_likelihood(&self) -> Real {
+        -0.5 * self.outlier_sigmas * self.outlier_sigmas / self.correlation
+    }
+
     /// Checks every range; says which setting is wrong.
     pub fn check(&self) -> crate::Result<()> {
         for (name, v) in [
@@ -88,6 +102,13 @@ pub struct Evaluation {
     pub curvature: [Real; 3],
     /// Points used.
     pub matched: usize,
+    /// Points short of the map: in front of the wall their ray meets by
+    /// more than the outlier cap, or with no wall along their ray. Seen
+    /// on something the map does not hold (a person, a box) in free
+    /// space, they count as outliers in the likelihood; unlike a point
+    /// behind a wall or facing the wrong way, they do not contradict the
+    /// pose.
+    pub short: usize,
 }
 
 /// Evaluates the observation at `pose` against the walls `lines` of `map`
@@ -104,13 +125,16 @@ pub fn evaluate(
     let per_variance = 1.0 / (o.correlation * o.sigma * o.sigma);
     let min_cos = o.normal_tolerance_deg.to_radians().cos();
     let cap = o.outlier_sigmas * o.sigma;
-    let outlier = -0.5 * cap * cap * per_variance;
+    let outlier = o.outlier_log_likelihood();
     let mut e = Evaluation::default();
     for (p, n) in obs.points.iter().zip(&obs.normals) {
         let (px, py) = (Real::from(p[0]), Real::from(p[1]));
         let q = (pose.x + c * px - s * py, pose.y + s * px + c * py);
         let Some((line, _)) = first_hit(map, lines.iter().copied(), sensor, q) else {
+            // Nothing on the map along the ray: the point is on something
+            // the map does not hold, in free space.
             e.log_likelihood += outlier;
+            e.short += 1;
             continue;
         };
         let w = &map.walls[line as usize];
@@ -119,12 +143,15 @@ pub fn evaluate(
         let (lx, ly) = (-ey / len, ex / len);
         let (nx, ny) = (Real::from(n[0]), Real::from(n[1]));
         let (wx, wy) = (c * nx - s * ny, s * nx + c * ny);
-        if (lx * wx + ly * wy).abs() < min_cos {
-            e.log_likelihood += outlier;
-            continue;
-        }
         let d = lx * (q.0 - w.a.0) + ly * (q.1 - w.a.1);
         if d.abs() > cap {
+            e.log_likelihood += outlier;
+            // On the sensor's side of the wall the ray meets: in front of it.
+            let sensor_side = lx * (sensor.0 - w.a.0) + ly * (sensor.1 - w.a.1);
+            e.short += usize::from(d * sensor_side > 0.0);
+            continue;
+        }
+        if (lx * wx + ly * wy).abs() < min_cos {
             e.log_likelihood += outlier;
             continue;
         }
@@ -251,6 +278,51 @@ mod tests {
         ids.sort_unstable();
         ids.dedup();
         ids
+    }
+
+    #[test]
+    fn points_in_front_of_their_wall_or_with_none_along_the_ray_are_short_and_points_behind_it_are_not() {
+        let map = room();
+        let truth = Pose2::new(3.0, 3.0, 0.4);
+        let o = CgrOptions::default();
+        let ids = scene_ids(&map, &truth);
+        let clean = evaluate(&map, &ids, &truth, &observe(&map, &truth), &o);
+        assert_eq!(clean.short, 0, "{clean:?}");
+        // Points seen head-on (so that a move along the ray moves them off
+        // the wall's line too), alternately pulled halfway to the sensor
+        // (something unmapped in the way) and pushed 0.5 m past their wall
+        // (what a wrong pose sees).
+        let mut obs = observe(&map, &truth);
+        let head_on: Vec<usize> = (0..obs.points.len())
+            .filter(|&k| {
+                let (p, n) = (obs.points[k], obs.normals[k]);
+                let r = p[0].hypot(p[1]);
+                r > 1.0 && (p[0] * n[0] + p[1] * n[1]).abs() / r > 0.7
+            })
+            .step_by(5)
+            .collect();
+        let (mut pulled, mut pushed) = (0, 0);
+        for (i, &k) in head_on.iter().enumerate() {
+            let p = obs.points[k];
+            let scale = if i % 2 == 0 { 0.5 } else { 1.0 + 0.5 / p[0].hypot(p[1]) };
+            obs.points[k] = [p[0] * scale, p[1] * scale];
+            if i % 2 == 0 { pulled += 1 } else { pushed += 1 }
+        }
+        assert!(pulled > 10 && pushed > 10, "{pulled} pulled, {pushed} pushed");
+        let e = evaluate(&map, &ids, &truth, &obs, &o);
+        assert_eq!(e.short, pulled, "{e:?}");
+        assert_eq!(e.matched, obs.points.len() - pulled - pushed, "{e:?}");
+        let expected = (pulled + pushed) as Real * o.outlier_log_likelihood();
+        assert!((e.log_likelihood - expected).abs() < 1e-6, "{} vs {expected}", e.log_likelihood);
+        // A point with no wall along its ray is short too.
+        let wall = LineMap::parse("wall", "2,-1,2,1\n").unwrap();
+        let obs = Observation2d {
+            points: vec![[2.0, 0.0], [1.0, 3.0]],
+            normals: vec![[-1.0, 0.0], [-1.0, 0.0]],
+            ..Observation2d::default()
+        };
+        let e = evaluate(&wall, &[0], &Pose2::IDENTITY, &obs, &o);
+        assert_eq!((e.matched, e.short), (1, 1), "{e:?}");
     }
 
     #[test]

@@ -14,7 +14,7 @@ use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::cgr::measurement::{CgrOptions, refine};
+use crate::cgr::measurement::{CgrOptions, Evaluation, refine};
 use crate::cgr::observation::Observation2d;
 use crate::cgr::scene_grid::SceneGrid;
 use crate::pf::kld::Kld;
@@ -307,6 +307,22 @@ impl CgrModel {
     }
 }
 
+/// How well a reading fits a pose, for telling a lost robot (augmented
+/// MCL): the log-likelihood per point. With `occlusion_fits`, the points
+/// short of the map (people, boxes: in free space, in front of the walls)
+/// count as fitting: any pose would see them so, and a person or a box
+/// filling a depth camera's view is no sign of being lost, while points
+/// behind walls or facing the wrong way are. −∞ for a reading without
+/// points, which the injection rule passes over.
+fn fit(e: &Evaluation, input: &Observation2d, o: &CgrOptions) -> Real {
+    let points = input.points.len();
+    if points == 0 {
+        return Real::NEG_INFINITY;
+    }
+    let short = if o.occlusion_fits { e.short as Real } else { 0.0 };
+    (e.log_likelihood - short * o.outlier_log_likelihood()) / points as Real
+}
+
 /// Two observed surfaces at least this far apart in direction, degrees,
 /// fix a proposed pose's position (see `CgrModel::propose`).
 const CORNER_ANGLE: Real = 30.0;
@@ -484,9 +500,12 @@ impl ParticleModel for CgrModel {
         let (refined, e, evaluations) =
             refine(&self.map, &mut |p: &Pose2| self.lines_at(p), pose, input, &self.options.cgr);
         *pose = refined;
-        let points = input.points.len().max(1) as Real;
         let prior = if self.can_be_at(pose) { 0.0 } else { OUTSIDE_LOG_PRIOR };
-        Correction { log_likelihood: e.log_likelihood + prior, evaluations, fit: e.log_likelihood / points }
+        Correction {
+            log_likelihood: e.log_likelihood + prior,
+            evaluations,
+            fit: fit(&e, input, &self.options.cgr),
+        }
     }
 
     fn pose(&self, pose: &Pose2) -> Pose2 {

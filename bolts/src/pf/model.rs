@@ -61,6 +61,15 @@ pub trait ParticleModel: Send + Sync + 'static {
         let _ = (input, scratch);
     }
 
+    /// Checks a reading before any particle takes it (`first`: the run's
+    /// first reading, `None` for the first itself). `Err` says why the
+    /// model cannot take it, and the run fails saying so; the default
+    /// takes every reading.
+    fn admit(&self, first: Option<&Self::Input>, input: &Self::Input) -> Result<(), String> {
+        let _ = (first, input);
+        Ok(())
+    }
+
     /// Refines a particle against a correcting reading, drawing from `rng`
     /// where the refinement samples (SLAM's Gaussian proposal); returns its
     /// log-likelihood and the work spent.
@@ -186,8 +195,9 @@ pub struct Correction {
     /// Work spent (for SLAM: pose evaluations).
     pub evaluations: u32,
     /// How well the reading fits, on a scale that does not grow with the
-    /// reading's size (for CGR: the log-likelihood per point); what
-    /// augmented MCL averages. Models without injection may repeat the
-    /// log-likelihood.
+    /// reading's size (for CGR: the log-likelihood per point, over the
+    /// points not seen in front of their wall); what augmented MCL
+    /// averages; −∞ when the reading says nothing. Models without
+    /// injection may repeat the log-likelihood.
     pub fit: Real,
 }

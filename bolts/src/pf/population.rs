@@ -196,6 +196,7 @@ impl Population {
         };
         self.averages = Some((slow, fast));
         let share = 1.0 - (fast - slow + i.min_drop).exp();
+        tracing::debug!(best, fast, slow, share, "augmented MCL");
         if share > 0.0 { share.max(i.lost_share) } else { 0.0 }
     }
 

@@ -157,6 +157,30 @@ impl ParticleModel for SlamModel {
         (input.stamp, input.odometry)
     }
 
+    /// A scan whose beams, from where its odometry puts it, would reach
+    /// past the map's bound ([`SlamOptions::max_map_m`], a square centred
+    /// on the first scan) is refused: a jump in the odometry would
+    /// otherwise grow every particle's map until memory runs out.
+    fn admit(&self, first: Option<&LaserReading>, input: &LaserReading) -> Result<(), String> {
+        let origin = first.unwrap_or(input).odometry;
+        let at = input.odometry.compose(&input.laser_offset);
+        let reach = self.options.max_urange.min(input.range_max);
+        let half = self.options.max_map_m / 2.0;
+        let (dx, dy) = (at.x - origin.x, at.y - origin.y);
+        if dx.abs() + reach <= half && dy.abs() + reach <= half {
+            return Ok(());
+        }
+        Err(format!(
+            "its odometry ({:.1}, {:.1}) is {:.0} m from the first scan's, and with beams of {reach} m the map \
+             would pass its bound of {} m a side (max_map_m): a jump in the log's odometry? (raise \
+             max_map_m if the robot went that far)",
+            input.odometry.x,
+            input.odometry.y,
+            dx.hypot(dy),
+            self.options.max_map_m
+        ))
+    }
+
     fn control(&self, previous: &LaserReading, input: &LaserReading) -> OdometryStep {
         OdometryStep { stamp: input.stamp, from: previous.odometry, to: input.odometry }
     }

@@ -193,7 +193,18 @@ pub struct SlamOptions {
     /// How poses are drawn: `"gaussian"` or `"climb"` (GMapping's). The
     /// default is `"gaussian"`.
     pub proposal: Proposal,
+    /// The largest map, metres a side, centred on the first scan: a scan
+    /// whose odometry puts the map past it (a jump in the log's odometry)
+    /// is refused with an error rather than grow every particle's map
+    /// until memory runs out. The default is 2000, past any building or
+    /// campus a laser maps.
+    pub max_map_m: Real,
 }
+
+/// The most memory one particle's tile index may take at `max_map_m`,
+/// bytes: a map bound that with a small `delta` would need more is an
+/// error before the run.
+pub const MAX_INDEX_BYTES: Real = 256.0 * 1024.0 * 1024.0;
 
 impl Default for SlamOptions {
     fn default() -> Self {
@@ -232,6 +243,7 @@ impl Default for SlamOptions {
             smoother: Smoother::Scans,
             resampling: Scheme::LowVariance,
             proposal: Proposal::Gaussian,
+            max_map_m: 2000.0,
         }
     }
 }
@@ -259,8 +271,22 @@ impl SlamOptions {
             ("wide_search_turn", self.wide_search_turn),
             ("old_map_reach", self.old_map_reach),
             ("old_map_turn", self.old_map_turn),
+            ("max_map_m", self.max_map_m),
         ] {
             positive(n, v)?;
+        }
+        // One pointer per tile of 32 × 32 cells, over the bound's square.
+        let tiles_a_side = self.max_map_m / self.delta / crate::slam::grid::TILE_SIDE as Real;
+        let index_bytes = tiles_a_side * tiles_a_side * std::mem::size_of::<usize>() as Real;
+        if index_bytes > MAX_INDEX_BYTES {
+            return Err(Error::Setting(format!(
+                "a {} m map of {} m cells needs {:.3e} bytes of tile index per particle (at most {} MiB): \
+                 raise delta or lower max_map_m",
+                self.max_map_m,
+                self.delta,
+                index_bytes,
+                MAX_INDEX_BYTES / 1024.0 / 1024.0
+            )));
         }
         for (n, v) in [
             ("srr", self.srr),

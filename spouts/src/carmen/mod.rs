@@ -8,7 +8,6 @@ mod parse;
 mod reader;
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 
 use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry};
@@ -17,14 +16,8 @@ use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, Sp
 pub use parse::{Laser, LineParser, Record, RecordError};
 pub use reader::{LogError, LogReader, ReadOptions, read_front_scans, read_log};
 
-/// How fast the spout replays.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Pace {
-    /// As fast as downstream accepts.
-    Max,
-    /// The recorded rate times this factor (1.0 = real time).
-    Recorded(f64),
-}
+pub use crate::pace::Pace;
+use crate::pace::{Pacer, pace};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -46,28 +39,15 @@ struct CarmenParams {
     max_scans: Option<u64>,
 }
 
-/// Parses a `rate` parameter: `"max"` or a positive factor.
-pub(crate) fn pace(rate: Option<&toml::Value>) -> Result<Pace, ParamError> {
-    match rate {
-        None => Ok(Pace::Max),
-        Some(toml::Value::String(s)) if s == "max" => Ok(Pace::Max),
-        Some(v) => match v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) {
-            Some(f) if f.is_finite() && f > 0.0 => Ok(Pace::Recorded(f)),
-            _ => Err(ParamError::new(format!("rate must be \"max\" or a positive factor, got {v}"))),
-        },
-    }
-}
-
 /// Replays a CARMEN log.
 #[derive(Debug)]
 pub struct CarmenSpout {
     log: PathBuf,
-    pace: Pace,
+    pacer: Pacer,
     options: ReadOptions,
     max_scans: Option<u64>,
     reader: Option<LogReader>,
     scans: u64,
-    clock: Option<(Instant, f64)>,
 }
 
 impl CarmenSpout {
@@ -79,21 +59,23 @@ impl CarmenSpout {
             return Err(ParamError::new("range_max must be a positive number of metres"));
         }
         Ok(CarmenSpout {
-            pace: pace(params.rate.as_ref())?,
+            pacer: Pacer::new(pace(params.rate.as_ref())?),
             log: params.log,
             options: ReadOptions { default_range_max: range_max, skip_bad: params.skip_bad },
             max_scans: params.max_scans,
             reader: None,
             scans: 0,
-            clock: None,
         })
     }
 
-    async fn wait_for(&mut self, stamp: f64) {
-        let Pace::Recorded(factor) = self.pace else { return };
-        let (start, first) = *self.clock.get_or_insert((Instant::now(), stamp));
-        let due = start + Duration::from_secs_f64(((stamp - first) / factor).max(0.0));
-        tokio::time::sleep_until(due.into()).await;
+    /// Waits until a record stamped `stamp` is due; `Ok(false)` when the
+    /// run is stopping. An error names the record's line.
+    async fn wait_for(&mut self, stamp: f64) -> Result<bool, BoxError> {
+        let waited = self.pacer.wait_for(stamp).await;
+        waited.map_err(|e| {
+            let line = self.reader.as_ref().map_or(0, LogReader::line);
+            format!("{}:{line}: {e}", self.log.display()).into()
+        })
     }
 }
 
@@ -102,7 +84,8 @@ impl Spout for CarmenSpout {
         d.output::<LaserReading>("scan").output::<LaserReading>("rear_scan").output::<Odometry>("odom");
     }
 
-    async fn open(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
+    async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        self.pacer.watch(ctx.stop());
         self.reader = Some(LogReader::open(&self.log, self.options)?);
         Ok(())
     }
@@ -123,7 +106,9 @@ impl Spout for CarmenSpout {
         };
         match record {
             Record::Scan(laser, reading) => {
-                self.wait_for(reading.stamp).await;
+                if !self.wait_for(reading.stamp).await? {
+                    return Ok(SpoutStatus::Continue);
+                }
                 let stream = match laser {
                     Laser::Front => {
                         self.scans += 1;
@@ -134,7 +119,9 @@ impl Spout for CarmenSpout {
                 out.emit(stream, reading).await?;
             }
             Record::Odom(odom) => {
-                self.wait_for(odom.stamp).await;
+                if !self.wait_for(odom.stamp).await? {
+                    return Ok(SpoutStatus::Continue);
+                }
                 out.emit("odom", odom).await?;
             }
             Record::Param(..) | Record::Other(_) => {}
@@ -146,16 +133,6 @@ impl Spout for CarmenSpout {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn rate_is_max_or_a_positive_factor() {
-        assert_eq!(pace(None).unwrap(), Pace::Max);
-        assert_eq!(pace(Some(&toml::Value::String("max".into()))).unwrap(), Pace::Max);
-        assert_eq!(pace(Some(&toml::Value::Float(2.5))).unwrap(), Pace::Recorded(2.5));
-        assert_eq!(pace(Some(&toml::Value::Integer(1))).unwrap(), Pace::Recorded(1.0));
-        assert!(pace(Some(&toml::Value::Float(-1.0))).is_err());
-        assert!(pace(Some(&toml::Value::String("fast".into()))).is_err());
-    }
 
     #[test]
     fn range_max_defaults_to_the_readers_and_must_be_positive() {

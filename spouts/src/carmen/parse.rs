@@ -115,6 +115,16 @@ pub enum RecordError {
         /// Its value.
         value: String,
     },
+    /// A laser geometry `PARAM` whose number cannot describe a laser.
+    #[error("PARAM {name}: expected {expected}, found {value}")]
+    ParamOutOfRange {
+        /// The parameter.
+        name: String,
+        /// Its value, as written.
+        value: String,
+        /// What it must be.
+        expected: &'static str,
+    },
 }
 
 /// Beam geometry of one laser, from PARAM lines or defaults.
@@ -170,18 +180,40 @@ impl LineParser {
     }
 
     fn apply_param(&mut self, name: &str, value: &str) -> Result<(), RecordError> {
-        let target = match name {
-            "laser_front_laser_angle_min" => &mut self.front.angle_min,
-            "laser_front_laser_angle_increment" => &mut self.front.angle_increment,
-            "robot_front_laser_max" => &mut self.front.range_max,
-            "laser_rear_laser_angle_min" => &mut self.rear.angle_min,
-            "laser_rear_laser_angle_increment" => &mut self.rear.angle_increment,
-            "robot_rear_laser_max" => &mut self.rear.range_max,
+        use std::f64::consts::{PI, TAU};
+        // Each with what a laser's geometry can be: a first beam within a
+        // turn either way, a nonzero step of at most half a turn, a
+        // positive range. NaN fails every test.
+        type Valid = fn(Real) -> bool;
+        let (target, valid, expected): (_, Valid, _) = match name {
+            "laser_front_laser_angle_min" => {
+                (&mut self.front.angle_min, |v| v.abs() <= TAU, "an angle in [-2π, 2π]")
+            }
+            "laser_front_laser_angle_increment" => {
+                (&mut self.front.angle_increment, |v| v != 0.0 && v.abs() <= PI, "a nonzero step in [-π, π]")
+            }
+            "robot_front_laser_max" => {
+                (&mut self.front.range_max, |v| v > 0.0 && v.is_finite(), "a range > 0")
+            }
+            "laser_rear_laser_angle_min" => {
+                (&mut self.rear.angle_min, |v| v.abs() <= TAU, "an angle in [-2π, 2π]")
+            }
+            "laser_rear_laser_angle_increment" => {
+                (&mut self.rear.angle_increment, |v| v != 0.0 && v.abs() <= PI, "a nonzero step in [-π, π]")
+            }
+            "robot_rear_laser_max" => (&mut self.rear.range_max, |v| v > 0.0 && v.is_finite(), "a range > 0"),
             _ => return Ok(()),
         };
         let v: Real = value
             .parse()
             .map_err(|_| RecordError::ParamNotANumber { name: name.to_string(), value: value.to_string() })?;
+        if !valid(v) {
+            return Err(RecordError::ParamOutOfRange {
+                name: name.to_string(),
+                value: value.to_string(),
+                expected,
+            });
+        }
         *target = Some(v);
         Ok(())
     }
@@ -391,6 +423,20 @@ mod tests {
         assert!(e.contains("expected a count for num_readings"), "{e}");
         let e = p.parse("PARAM robot_front_laser_max far h 0").unwrap_err();
         assert_eq!(e.to_string(), "PARAM robot_front_laser_max: expected a number, found \"far\"");
+        // Numbers that describe no laser: each used to be taken and to
+        // degrade the map silently.
+        for (line, expected) in [
+            (
+                "PARAM laser_front_laser_angle_increment nan h 0",
+                "expected a nonzero step in [-π, π], found nan",
+            ),
+            ("PARAM laser_front_laser_angle_increment 0 h 0", "expected a nonzero step in [-π, π], found 0"),
+            ("PARAM laser_rear_laser_angle_min inf h 0", "expected an angle in [-2π, 2π], found inf"),
+            ("PARAM robot_front_laser_max -1 h 0", "expected a range > 0, found -1"),
+        ] {
+            let e = p.parse(line).unwrap_err().to_string();
+            assert!(e.ends_with(expected), "{line}: {e}");
+        }
         assert_eq!(p.parse("PARAM x").unwrap_err(), RecordError::ParamIncomplete);
         assert_eq!(
             p.parse("FLASER 1 5 0 0 0 0 0 0 1 h 1").unwrap_err().to_string(),

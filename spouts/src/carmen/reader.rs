@@ -139,6 +139,11 @@ impl LogReader {
         &self.other
     }
 
+    /// The 1-based line last read (0 before the first).
+    pub fn line(&self) -> usize {
+        self.line
+    }
+
     /// The file being read.
     pub fn path(&self) -> &Path {
         &self.path

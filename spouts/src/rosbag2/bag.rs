@@ -52,6 +52,18 @@ pub enum BagError {
     /// The bag holds no MCAP file.
     #[error("{0}: no .mcap file in this bag folder")]
     Empty(PathBuf),
+    /// No message on a topic the readings need (a misspelled topic name).
+    #[error("{path}: no messages on {param} \"{topic}\"; the bag's topics: {present}")]
+    MissingTopic {
+        /// The bag.
+        path: PathBuf,
+        /// The setting that names the topic (`scan_topic`, `odom_topic`).
+        param: &'static str,
+        /// The topic asked for.
+        topic: String,
+        /// The topics the bag does hold, with their types.
+        present: String,
+    },
     /// The MCAP container is malformed or truncated.
     #[error("{path}: malformed MCAP after message {index}: {message}")]
     Container {
@@ -134,6 +146,8 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
     let mut odometry = Vec::new();
     let mut statics: Vec<Transform> = Vec::new();
     let mut skipped = 0;
+    // Every topic met, with its type: what a missing topic's error lists.
+    let mut seen: Vec<(String, String)> = Vec::new();
     for file in mcap_files(path)? {
         let bytes = std::fs::read(&file).map_err(|source| BagError::Io { path: file.clone(), source })?;
         let container = |index, e: mcap::McapError| BagError::Container {
@@ -145,6 +159,10 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
         for (index, message) in stream.enumerate() {
             let message = message.map_err(|e| container(index, e))?;
             let topic = message.channel.topic.as_str();
+            if !seen.iter().any(|(t, _)| t == topic) {
+                let schema = message.channel.schema.as_ref().map_or("", |s| s.name.as_str());
+                seen.push((topic.to_string(), schema.to_string()));
+            }
             let expected = if topic == topics.scan {
                 SCAN_TYPE
             } else if topic == topics.odom {
@@ -183,6 +201,26 @@ pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
                 }
             }
         }
+    }
+    let has = |topic: &str| seen.iter().any(|(t, _)| t == topic);
+    for (param, topic) in [("scan_topic", &topics.scan), ("odom_topic", &topics.odom)] {
+        if !has(topic) {
+            let present = seen.iter().map(|(t, ty)| format!("{t} ({ty})")).collect::<Vec<_>>().join(", ");
+            let present = if present.is_empty() { "none".to_string() } else { present };
+            return Err(BagError::MissingTopic {
+                path: path.to_path_buf(),
+                param,
+                topic: topic.clone(),
+                present,
+            });
+        }
+    }
+    if !has(&topics.tf_static) {
+        tracing::warn!(
+            bag = %path.display(),
+            "no messages on tf_static_topic \"{}\": the laser is taken to sit at the robot's origin",
+            topics.tf_static
+        );
     }
     odometry.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
     raw_scans.sort_by(|a, b| a.header.stamp.total_cmp(&b.header.stamp));

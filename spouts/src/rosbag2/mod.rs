@@ -10,7 +10,6 @@ pub mod messages;
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 
 use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry};
@@ -19,7 +18,7 @@ use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, Sp
 pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag};
 pub use cdr::CdrError;
 
-use crate::carmen::Pace;
+use crate::pace::{Pacer, pace};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -57,13 +56,12 @@ fn tf_static_topic() -> String {
 pub struct Rosbag2Spout {
     bag: PathBuf,
     topics: Topics,
-    pace: Pace,
+    pacer: Pacer,
     max_scans: Option<u64>,
     scans: VecDeque<LaserReading>,
     odometry: VecDeque<Odometry>,
     without_odometry: u64,
     skipped: u64,
-    clock: Option<(Instant, f64)>,
 }
 
 impl Rosbag2Spout {
@@ -78,13 +76,12 @@ impl Rosbag2Spout {
                 odom: params.odom_topic,
                 tf_static: params.tf_static_topic,
             },
-            pace: crate::carmen::pace(params.rate.as_ref())?,
+            pacer: Pacer::new(pace(params.rate.as_ref())?),
             max_scans: params.max_scans,
             scans: VecDeque::new(),
             odometry: VecDeque::new(),
             without_odometry: 0,
             skipped: 0,
-            clock: None,
         })
     }
 }
@@ -95,6 +92,7 @@ impl Spout for Rosbag2Spout {
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        self.pacer.watch(ctx.stop());
         let readings = read_bag(&self.bag, &self.topics)?;
         if readings.scans_without_odometry > 0 {
             tracing::warn!(
@@ -131,10 +129,9 @@ impl Spout for Rosbag2Spout {
             (Some(s), Some(o)) => s.stamp <= o.stamp,
         };
         let stamp = if scan_first { self.scans[0].stamp } else { self.odometry[0].stamp };
-        if let Pace::Recorded(factor) = self.pace {
-            let (start, first) = *self.clock.get_or_insert((Instant::now(), stamp));
-            let due = start + Duration::from_secs_f64(((stamp - first) / factor).max(0.0));
-            tokio::time::sleep_until(due.into()).await;
+        let waited = self.pacer.wait_for(stamp).await;
+        if !waited.map_err(|e| format!("{}: {e}", self.bag.display()))? {
+            return Ok(SpoutStatus::Continue);
         }
         // The match above set `scan_first` only with a scan queued, and
         // cleared it only with odometry queued: neither pop can fail.

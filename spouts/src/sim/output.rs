@@ -82,9 +82,16 @@ pub fn write_run(sim: Simulation, dir: &Path) -> Result<SimSummary> {
     write_file(&dir.join("ground_truth.tum"), truth.to_tum().as_bytes())?;
     let (relations, local, loops) = relations(&truth);
     write_file(&dir.join("sim.relations"), relations.as_bytes())?;
-    write_png(&rasterize(&world, 0.05), &truth.poses, &dir.join("world.png"))?;
+    // 5 cm pixels, coarser for a world wider than MAX_IMAGE_SIDE of them.
+    let (x0, y0, x1, y1) = world.bounds();
+    let resolution = ((x1 - x0).max(y1 - y0) / MAX_IMAGE_SIDE).max(0.05);
+    write_png(&rasterize(&world, resolution), &truth.poses, &dir.join("world.png"))?;
     Ok(SimSummary { scans: truth.len(), local_relations: local, loop_relations: loops })
 }
+
+/// The widest `world.png`, pixels: a map kilometres wide is drawn coarser
+/// rather than as gigapixels.
+const MAX_IMAGE_SIDE: Real = 8192.0;
 
 /// Writes `bytes` to `path` atomically; an error names the file.
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {

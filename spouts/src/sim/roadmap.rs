@@ -53,6 +53,11 @@ fn enclosed(world: &LineMap, p: (Real, Real), reach: Real) -> bool {
     hits >= RAYS_HIT
 }
 
+/// The most grid points a roadmap tests (each against the walls near
+/// it): 1000 × 1000, a quarter of a square kilometre at the usual
+/// half-metre spacing, some seconds of work.
+const MAX_POINTS: usize = 1_000_000;
+
 /// Why a map has no roadmap.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -87,10 +92,18 @@ pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, Roa
     let points = |extent: Real| (extent / spacing) as usize;
     // The grid's ids must be countable and fit in a Vec.
     let fits = |n: usize| n <= isize::MAX as usize / std::mem::size_of::<usize>();
-    let (nx, ny) = match (points(x1 - x0).checked_add(1), points(y1 - y0).checked_add(1)) {
+    let (mut nx, mut ny) = match (points(x1 - x0).checked_add(1), points(y1 - y0).checked_add(1)) {
         (Some(nx), Some(ny)) if nx.checked_mul(ny).is_some_and(fits) => (nx, ny),
         _ => return Err(RoadmapError::TooLarge(spacing)),
     };
+    // A map far larger than a building (a site kilometres wide) gets a
+    // coarser grid rather than hours of work: routes need no finer one.
+    let mut spacing = spacing;
+    if nx * ny > MAX_POINTS {
+        spacing *= ((nx * ny) as Real / MAX_POINTS as Real).sqrt();
+        (nx, ny) = (points(x1 - x0) + 1, points(y1 - y0) + 1);
+        tracing::info!(spacing, "the map is large: roadmap points every {spacing:.2} m");
+    }
     let mut id = vec![usize::MAX; nx * ny];
     let mut nodes = Vec::new();
     for j in 0..ny {
@@ -200,5 +213,19 @@ mod tests {
         );
         let nothing = roadmap(LineMap::default(), 0.5, 0.4).unwrap_err();
         assert!(matches!(nothing, RoadmapError::NoFreeSpace { .. }), "{nothing}");
+    }
+
+    #[test]
+    fn a_site_a_kilometre_wide_gets_a_coarser_grid() {
+        // 2001 × 2001 points at 0.5 m: four times the budget, so points
+        // every metre; every node inside, clear of the walls.
+        let site =
+            LineMap::parse("site", "0,0,1000,0\n1000,0,1000,1000\n1000,1000,0,1000\n0,1000,0,0\n").unwrap();
+        let floor = roadmap(site, 0.5, 0.4).unwrap();
+        assert!(floor.nodes.len() <= MAX_POINTS, "{} nodes", floor.nodes.len());
+        assert!(floor.nodes.len() > MAX_POINTS * 9 / 10, "{} nodes", floor.nodes.len());
+        let (a, b) = (floor.nodes[0], floor.nodes[1]);
+        let step = (b.0 - a.0).hypot(b.1 - a.1);
+        assert!((step - 1.0).abs() < 0.01, "points {step} m apart");
     }
 }

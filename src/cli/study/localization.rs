@@ -234,7 +234,7 @@ pub(super) fn study(plan: &Plan) -> ExitCode {
         .collect();
     let rows = run_all(&jobs, plan.jobs);
     let md = markdown(plan, &cells, &rows);
-    print!("{md}");
+    out!("{md}");
     let written = write_atomic(&plan.out.join("study.csv"), csv(plan, &rows).as_bytes())
         .and_then(|()| write_atomic(&plan.out.join("study.md"), md.as_bytes()));
     if let Err(e) = written {

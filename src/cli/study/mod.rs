@@ -225,7 +225,7 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
     let summaries =
         report::summarize(&logs.iter().map(|l| l.path.clone()).collect::<Vec<_>>(), &rows, &odometry);
     let md = report::markdown(&command_line(), &summaries);
-    print!("{md}");
+    out!("{md}");
     let written = write_atomic(&args.out.join("study.csv"), report::csv(&rows).as_bytes())
         .and_then(|()| write_atomic(&args.out.join("study.md"), md.as_bytes()))
         .and_then(|()| write_atomic(&args.out.join("study.svg"), svg::plot(&summaries, &rows).as_bytes()));

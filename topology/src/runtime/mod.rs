@@ -29,5 +29,5 @@ pub(crate) mod threads;
 pub(crate) mod wiring;
 
 pub use in_process::run;
-pub use options::{Progress, RunOptions};
+pub use options::{Progress, RunOptions, StopRequest};
 pub use outcome::RunError;

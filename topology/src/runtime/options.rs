@@ -3,8 +3,10 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
+
+use tokio::sync::Notify;
 
 /// Live counters for a progress display.
 #[derive(Debug, Default)]
@@ -27,7 +29,45 @@ pub struct RunOptions {
     /// Set it to end the run early and cleanly: spouts are no longer polled,
     /// then everything in flight is processed and every component finishes,
     /// as if the sources had ended (Ctrl-C in `squall run`).
-    pub stop: Arc<AtomicBool>,
+    pub stop: Arc<StopRequest>,
+}
+
+/// A request to end a run early (Ctrl-C, SIGTERM). Spouts are no longer
+/// polled once it is made; a spout waiting inside `next` (a paced log
+/// replay sleeping until a record is due) can wait on
+/// [`requested`](Self::requested) beside its timer, through
+/// [`TaskContext::stop`](crate::TaskContext::stop), so that the stop does
+/// not wait for the timer.
+#[derive(Debug, Default)]
+pub struct StopRequest {
+    made: AtomicBool,
+    woken: Notify,
+}
+
+impl StopRequest {
+    /// Makes the request and wakes everything waiting on it.
+    pub fn request(&self) {
+        self.made.store(true, Ordering::SeqCst);
+        self.woken.notify_waiters();
+    }
+
+    /// Whether the request has been made.
+    pub fn is_made(&self) -> bool {
+        self.made.load(Ordering::SeqCst)
+    }
+
+    /// Resolves once the request is made (at once if it was).
+    pub async fn requested(&self) {
+        let woken = self.woken.notified();
+        tokio::pin!(woken);
+        // Registered before the flag is read: a request made in between
+        // still wakes it.
+        woken.as_mut().enable();
+        if self.is_made() {
+            return;
+        }
+        woken.await;
+    }
 }
 
 impl Default for RunOptions {
@@ -36,7 +76,7 @@ impl Default for RunOptions {
             out_dir: None,
             progress: None,
             abort_grace: Duration::from_secs(5),
-            stop: Arc::new(AtomicBool::new(false)),
+            stop: Arc::new(StopRequest::default()),
         }
     }
 }

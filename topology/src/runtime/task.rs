@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::mpsc::Sender;
 use std::time::{Duration, Instant};
 
@@ -23,11 +23,11 @@ use crate::error::BoxError;
 use crate::metrics::TaskOutcome;
 use crate::params::Params;
 use crate::registry::{BoltFactory, SpoutFactory};
-use crate::runtime::Progress;
 use crate::runtime::acker::{AckTracker, Outcome, Replay};
 use crate::runtime::control::{Control, Event, EventKind, Stage};
 use crate::runtime::emitter::Emitter;
 use crate::runtime::queue::EdgeQueue;
+use crate::runtime::{Progress, StopRequest};
 use crate::spec::AckPolicy;
 use crate::tuple::Tuple;
 
@@ -149,6 +149,23 @@ impl BoltTask {
         self.parked_taken = std::mem::take(&mut self.batch_taken);
     }
 
+    /// Discards the tuples taken from the queues but not executed (the
+    /// rest of a batch when the task failed or the run aborted, a parked
+    /// batch): each counts as undelivered on its queue, its anchor failed.
+    fn discard_taken(&mut self) {
+        for (queue, from) in [(&mut self.batch, self.batch_from), (&mut self.parked, self.parked_from)] {
+            if queue.is_empty() {
+                continue;
+            }
+            self.inbox[from].counters.undelivered.fetch_add(queue.len() as u64, Ordering::Relaxed);
+            for tuple in queue.drain(..) {
+                if let Some(a) = tuple.anchor {
+                    a.fail();
+                }
+            }
+        }
+    }
+
     fn release_batch(&mut self) {
         if self.batch_taken > 0 {
             self.inbox[self.batch_from].release(self.batch_taken);
@@ -169,11 +186,13 @@ impl BoltTask {
         out.anchor = tuple.anchor.take();
         out.input_failed = false;
         let blocked_before = out.stats.blocked;
+        // Counted before it runs: a tuple whose execution panics or fails
+        // was received all the same.
+        out.stats.received += 1;
         let result = bolt.execute(tuple, out).await;
         let now = Instant::now();
         let elapsed = now - clock;
         let stats = &mut out.stats;
-        stats.received += 1;
         stats.busy += elapsed.saturating_sub(stats.blocked - blocked_before);
         stats.latency.saturating_record((elapsed.as_nanos() as u64).max(1));
         if let Some(anchor) = out.anchor.take() {
@@ -274,7 +293,7 @@ pub(crate) struct SpoutTask {
     pub(crate) common: TaskCommon,
     pub(crate) acking: Option<(Arc<AckTracker>, AckPolicy)>,
     pub(crate) progress: Option<Arc<Progress>>,
-    stop: Arc<AtomicBool>,
+    stop: Arc<StopRequest>,
     exhausted: bool,
     reported_done: bool,
     settled: Vec<(u64, Outcome, Option<Replay>)>,
@@ -286,7 +305,7 @@ impl SpoutTask {
         common: TaskCommon,
         acking: Option<(Arc<AckTracker>, AckPolicy)>,
         progress: Option<Arc<Progress>>,
-        stop: Arc<AtomicBool>,
+        stop: Arc<StopRequest>,
     ) -> Self {
         SpoutTask {
             common,
@@ -352,7 +371,7 @@ pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Res
             return Ok(());
         }
         let pending = t.settle(spout).await?;
-        if t.stop.load(Ordering::Relaxed) {
+        if t.stop.is_made() {
             t.exhausted = true;
         }
         let max_pending = t.acking.as_ref().map_or(usize::MAX, |(_, p)| p.max_pending);
@@ -476,7 +495,9 @@ pub(crate) fn bolt_thread(
         Ok(mut bolt) => Incarnation::of(|| bolt.run(task, &runtime)),
         Err(e) => Incarnation::Failed(format!("could not be created: {e}").into()),
     });
-    // Whatever is still queued can no longer be executed.
+    // Whatever is still queued, or taken in a batch and not yet executed,
+    // can no longer be executed: counted as undelivered on its queue.
+    task.discard_taken();
     task.release_batch();
     for q in &task.inbox {
         for t in q.close() {

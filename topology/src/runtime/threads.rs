@@ -4,6 +4,7 @@
 
 use std::sync::mpsc;
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use crate::metrics::TaskOutcome;
 use crate::plan::{Factory, Topology};
@@ -86,16 +87,29 @@ pub(crate) fn spawn_tasks(
     Ok(threads)
 }
 
+/// How long, after a failure, joining waits for a task thread that has
+/// not yet ended. The coordinator has already waited out the abort's
+/// grace for every task to report its exit; a task reports just before
+/// its thread returns, so a thread that reported ends within this.
+const LAST_STEPS: Duration = Duration::from_millis(500);
+
 /// Joins the task threads. After a failure, threads that have not ended
-/// within the abort's grace are left behind and give no outcome.
+/// shortly after the abort's grace are left behind and give no outcome.
 pub(crate) fn join_tasks(threads: TaskThreads, clean: bool) -> Vec<Vec<Option<TaskOutcome>>> {
+    let deadline = Instant::now() + LAST_STEPS;
+    let ended = |h: &JoinHandle<TaskOutcome>| {
+        while !h.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        h.is_finished()
+    };
     threads
         .into_iter()
         .map(|handles| {
             handles
                 .into_iter()
                 .map(|h| match h {
-                    Some(h) if h.is_finished() || clean => Some(h.join().unwrap_or_else(|_| lost_outcome())),
+                    Some(h) if clean || ended(&h) => Some(h.join().unwrap_or_else(|_| lost_outcome())),
                     Some(_) => Some(lost_outcome()),
                     None => None,
                 })

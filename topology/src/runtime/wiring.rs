@@ -12,7 +12,7 @@ use crate::runtime::control::{Control, TaskSignal};
 use crate::runtime::emitter::{Emitter, PeerRoute, Route, SpoutAcking, StreamRoute, Subscription};
 use crate::runtime::queue::EdgeQueue;
 use crate::runtime::target::Target;
-use crate::runtime::{Progress, RunOptions};
+use crate::runtime::{Progress, RunOptions, StopRequest};
 use crate::tuple::Source;
 
 /// Queues, controls and emitters of every task, before the threads start.
@@ -29,6 +29,7 @@ pub(crate) struct Wiring {
     topology_name: Arc<str>,
     out_dir: Option<Arc<PathBuf>>,
     progress: Option<Arc<Progress>>,
+    stop: Arc<StopRequest>,
 }
 
 /// One delivery path: from task `from` of component `producer` to task
@@ -135,6 +136,7 @@ impl Wiring {
             topology_name: topology.spec.name.as_str().into(),
             out_dir: options.out_dir.clone().map(Arc::new),
             progress: options.progress.clone(),
+            stop: options.stop.clone(),
         };
         wiring.emitters = comps
             .iter()
@@ -228,6 +230,7 @@ impl Wiring {
             out_dir: self.out_dir.clone(),
             progress: self.progress.clone(),
             replacement: self.replacements.contains(&(c, t)),
+            stop: self.stop.clone(),
         }
     }
 

@@ -39,9 +39,22 @@ impl fmt::Display for SpecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}:{}: ", self.file, self.line)?;
         if let Some((role, name)) = &self.component {
-            write!(f, "{role} \"{name}\": ")?;
+            write!(f, "{role} \"{}\": ", clipped(name))?;
         }
-        f.write_str(&self.message)
+        f.write_str(&clipped(&self.message))
+    }
+}
+
+/// The most characters of a name or message an error shows: a
+/// megabyte-long token (a pasted file, a runaway string) is cut, with how
+/// much was left out.
+const SHOWN: usize = 400;
+
+/// `text`, cut after [`SHOWN`] characters.
+fn clipped(text: &str) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(SHOWN) {
+        None => text.into(),
+        Some((at, _)) => format!("{}… ({} more bytes)", &text[..at], text.len() - at).into(),
     }
 }
 

@@ -31,6 +31,33 @@ pub const DEFAULT_MAX_PENDING: usize = 1024;
 /// Default replays of one failed tuple before it is abandoned (and counted).
 pub const DEFAULT_MAX_RETRIES: u32 = 3;
 
+/// The most tasks one component may have. Each task is a runtime task
+/// with its own queues and state; far past the cores of any one machine,
+/// and past what a cluster of them runs well, a larger count is a typo.
+pub const MAX_PARALLELISM: usize = 1024;
+/// The most tasks a topology may have in all.
+pub const MAX_TASKS: usize = 4096;
+/// The largest input or peer queue, in tuples: a bounded queue reserves
+/// its slots when it is made, so a bound past this asks for gigabytes
+/// before the first tuple.
+pub const MAX_QUEUE: usize = 1 << 20;
+/// The most un-acked tuples a spout may keep.
+pub const MAX_PENDING: usize = 1 << 20;
+/// The longest tick period or ack timeout, seconds (a week): longer ones
+/// cannot be timed on every platform's clock.
+pub const MAX_PERIOD_SECS: f64 = 7.0 * 24.0 * 3600.0;
+
+/// A number as a person reads it in a message: huge or tiny ones in
+/// exponent form (`1e300`), not their three hundred digits.
+pub fn readable_number(v: f64) -> String {
+    if v != 0.0 && !(1e-6..1e12).contains(&v.abs()) { format!("{v:e}") } else { format!("{v}") }
+}
+
+/// A period in seconds, in (0, [`MAX_PERIOD_SECS`]].
+fn period(secs: f64) -> Option<Duration> {
+    (secs > 0.0 && secs <= MAX_PERIOD_SECS).then(|| Duration::from_secs_f64(secs))
+}
+
 /// A parsed, structurally valid topology.
 #[derive(Debug, Clone)]
 pub struct TopologySpec {
@@ -202,9 +229,20 @@ fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> Resul
             ));
             continue;
         }
+        if let Err(why) = check_name(&cname) {
+            errors.push(source.error(comp.name.span().start, Some((role, &cname)), why));
+        }
         if let Some(c) = convert_component(role, comp, line, &source, &mut errors) {
             components.push(c);
         }
+    }
+    let tasks: usize = components.iter().map(|c| c.parallelism).sum();
+    if tasks > MAX_TASKS {
+        errors.push(source.error_at_line(
+            1,
+            None,
+            format!("the components' parallelism adds up to {tasks} tasks; at most {MAX_TASKS} run in one topology"),
+        ));
     }
     if errors.is_empty() {
         Ok(TopologySpec { name, seed, components, source, text })
@@ -213,19 +251,49 @@ fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> Resul
     }
 }
 
+/// Whether `name` can name a component: `--set NAME.key=value`, metrics
+/// keys and cluster addresses all take it as one word. Letters, digits,
+/// `_` and `-`, starting with a letter or `_`, not `topology` (the
+/// `[topology]` table's own `--set` prefix).
+fn check_name(name: &str) -> Result<(), String> {
+    let mut chars = name.chars();
+    let Some(first) = chars.next() else { return Err("a component name must not be empty".into()) };
+    if !(first.is_ascii_alphabetic() || first == '_')
+        || !chars.all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        let shown: String = name.chars().take(40).collect();
+        return Err(format!(
+            "component name {shown:?} must be letters, digits, '_' and '-', starting with a letter or '_'"
+        ));
+    }
+    if name == "topology" {
+        return Err(
+            "\"topology\" names the [topology] table (as in --set topology.seed=1); pick another name".into(),
+        );
+    }
+    Ok(())
+}
+
+/// An integer setting in [1, `max`]; an error naming it otherwise.
 fn positive(
     value: &Spanned<i64>,
     what: &str,
+    max: usize,
     at: Option<(Role, &str)>,
     source: &SourceText,
     errors: &mut Vec<SpecError>,
 ) -> Option<usize> {
     let v = *value.get_ref();
-    if v >= 1 {
-        Some(v as usize)
-    } else {
-        errors.push(source.error(value.span().start, at, format!("{what} must be at least 1, got {v}")));
-        None
+    match usize::try_from(v) {
+        Ok(n) if (1..=max).contains(&n) => Some(n),
+        _ => {
+            errors.push(source.error(
+                value.span().start,
+                at,
+                format!("{what} must be in 1..={max}, got {v}"),
+            ));
+            None
+        }
     }
 }
 
@@ -241,11 +309,11 @@ fn convert_component(
     let before = errors.len();
     let parallelism = match &comp.parallelism {
         None => 1,
-        Some(p) => positive(p, "parallelism", at, source, errors).unwrap_or(1),
+        Some(p) => positive(p, "parallelism", MAX_PARALLELISM, at, source, errors).unwrap_or(1),
     };
     let peer_queue = match &comp.peer_queue {
         None => DEFAULT_QUEUE,
-        Some(q) => positive(q, "peer_queue", at, source, errors).unwrap_or(1),
+        Some(q) => positive(q, "peer_queue", MAX_QUEUE, at, source, errors).unwrap_or(1),
     };
     let tick = comp.tick_secs.as_ref().and_then(|t| {
         if role == Role::Spout {
@@ -253,20 +321,30 @@ fn convert_component(
             return None;
         }
         let secs = *t.get_ref();
-        if secs.is_finite() && secs > 0.0 {
-            Some(Duration::from_secs_f64(secs))
-        } else {
-            errors.push(source.error(t.span().start, at, format!("tick_secs must be > 0, got {secs}")));
-            None
+        let tick = period(secs);
+        if tick.is_none() {
+            errors.push(source.error(
+                t.span().start,
+                at,
+                format!(
+                    "tick_secs must be in (0, {MAX_PERIOD_SECS}] (a week), got {}",
+                    readable_number(secs)
+                ),
+            ));
         }
+        tick
     });
     let max_restarts = match &comp.restart {
         None => 0,
-        Some(r) if r.get_ref().max_restarts >= 0 => r.get_ref().max_restarts as u32,
-        Some(r) => {
-            errors.push(source.error(r.span().start, at, "restart.max_restarts must be >= 0"));
+        Some(r) => u32::try_from(r.get_ref().max_restarts).unwrap_or_else(|_| {
+            let found = r.get_ref().max_restarts;
+            errors.push(source.error(
+                r.span().start,
+                at,
+                format!("restart.max_restarts must be in 0..={}, got {found}", u32::MAX),
+            ));
             0
-        }
+        }),
     };
     let ack = comp.ack.as_ref().and_then(|a| {
         if role == Role::Bolt {
@@ -274,10 +352,10 @@ fn convert_component(
             return None;
         }
         let r = a.get_ref();
-        let timeout = r.timeout_secs.map_or(Some(DEFAULT_ACK_TIMEOUT), |s| {
-            (s.is_finite() && s > 0.0).then(|| Duration::from_secs_f64(s))
+        let timeout = r.timeout_secs.map_or(Some(DEFAULT_ACK_TIMEOUT), period);
+        let max_pending = r.max_pending.map_or(Some(DEFAULT_MAX_PENDING), |p| {
+            usize::try_from(p).ok().filter(|p| (1..=MAX_PENDING).contains(p))
         });
-        let max_pending = r.max_pending.map_or(Some(DEFAULT_MAX_PENDING), |p| (p >= 1).then_some(p as usize));
         let max_retries = r.max_retries.map_or(Some(DEFAULT_MAX_RETRIES), |p| u32::try_from(p).ok());
         match (timeout, max_pending, max_retries) {
             (Some(timeout), Some(max_pending), Some(max_retries)) => {
@@ -287,7 +365,11 @@ fn convert_component(
                 errors.push(source.error(
                     a.span().start,
                     at,
-                    "ack expects timeout_secs > 0, max_pending >= 1, max_retries >= 0",
+                    format!(
+                        "ack expects timeout_secs in (0, {MAX_PERIOD_SECS}], max_pending in 1..={MAX_PENDING}, \
+                         max_retries in 0..={}",
+                        u32::MAX
+                    ),
                 ));
                 None
             }
@@ -385,7 +467,7 @@ fn convert_input(
     };
     let queue = match &input.queue {
         None => DEFAULT_QUEUE,
-        Some(q) => positive(q, "queue", at, source, errors).unwrap_or(1),
+        Some(q) => positive(q, "queue", MAX_QUEUE, at, source, errors).unwrap_or(1),
     };
     (errors.len() == before).then(|| InputSpec {
         from: input.from.into_inner(),
@@ -438,6 +520,76 @@ inputs = [ { from = "src", grouping = "fields", fields = ["key"], queue = 8, pol
         let bad = GOOD.replace("\"fields\", fields = [\"key\"]", "\"broadcast\"");
         let err = TopologySpec::parse("t.toml", &bad).unwrap_err().to_string();
         assert!(err.starts_with("t.toml:15: bolt \"b\": unknown grouping \"broadcast\""), "{err}");
+    }
+
+    #[test]
+    fn settings_past_what_can_be_timed_or_held_are_errors_with_their_line() {
+        // (replaced text, expected message start); each was accepted, or
+        // panicked, or wrapped before.
+        let cases = [
+            (
+                "parallelism = 3",
+                "parallelism = 3\ntick_secs = 1e300",
+                "t.toml:15: bolt \"b\": tick_secs must be in (0, 604800]",
+            ),
+            (
+                "parallelism = 3",
+                "parallelism = 3\ntick_secs = 1e20",
+                "t.toml:15: bolt \"b\": tick_secs must be in",
+            ),
+            (
+                "parallelism = 3",
+                "parallelism = 1000000001",
+                "t.toml:14: bolt \"b\": parallelism must be in 1..=1024",
+            ),
+            ("queue = 8", "queue = 4000000000", "t.toml:15: bolt \"b\": queue must be in 1..=1048576"),
+            (
+                "parallelism = 3",
+                "parallelism = 3\nrestart = { max_restarts = 4294967296 }",
+                "t.toml:15: bolt \"b\": restart.max_restarts must be in 0..=4294967295",
+            ),
+            (
+                "params = { count = 10 }",
+                "params = { count = 10 }\nack = { timeout_secs = 1e20 }",
+                "t.toml:10: spout \"src\": ack expects timeout_secs in (0, 604800]",
+            ),
+        ];
+        for (from, to, expected) in cases {
+            let bad = GOOD.replace(from, to);
+            let err = TopologySpec::parse("t.toml", &bad).unwrap_err().to_string();
+            assert!(err.starts_with(expected), "{to}: {err}");
+        }
+        let many = GOOD.replace("parallelism = 3", "parallelism = 1024")
+            + "\n[[bolt]]\nname = \"c\"\nkind = \"k\"\nparallelism = 1024\ninputs = [ { from = \"b\" } ]\n"
+                .repeat(4)
+                .as_str();
+        let many = many
+            .replacen("name = \"c\"", "name = \"c1\"", 1)
+            .replacen("name = \"c\"", "name = \"c2\"", 1)
+            .replacen("name = \"c\"", "name = \"c3\"", 1)
+            .replacen("name = \"c\"", "name = \"c4\"", 1);
+        let err = TopologySpec::parse("t.toml", &many).unwrap_err().to_string();
+        assert!(err.contains("adds up to 5121 tasks; at most 4096"), "{err}");
+    }
+
+    #[test]
+    fn names_that_other_features_cannot_address_are_errors() {
+        for (name, expected) in [
+            ("", "must not be empty"),
+            ("topology", "names the [topology] table"),
+            ("a.b", "must be letters, digits"),
+            ("9lives", "must be letters, digits"),
+        ] {
+            let bad = GOOD.replace("name = \"b\"", &format!("name = {name:?}"));
+            let err = TopologySpec::parse("t.toml", &bad).unwrap_err().to_string();
+            assert!(err.starts_with("t.toml:12:") && err.contains(expected), "{name:?}: {err}");
+        }
+        let good = GOOD.replace("name = \"b\"", "name = \"_scan-matcher2\"");
+        assert!(TopologySpec::parse("t.toml", &good).is_ok());
+        // A megabyte-long name is cut in the message, not echoed whole.
+        let long = GOOD.replace("name = \"b\"", &format!("name = \"{}\"", ".".repeat(1 << 20)));
+        let err = TopologySpec::parse("t.toml", &long).unwrap_err().to_string();
+        assert!(err.len() < 1200 && err.contains("more bytes)"), "{} bytes: {:.200}", err.len(), err);
     }
 
     #[test]

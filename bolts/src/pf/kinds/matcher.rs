@@ -83,6 +83,8 @@ pub struct Matcher<M: HostedModel> {
     shard: Option<Shard<M>>,
     gate: M::Gate,
     previous: Option<Arc<Reading<M::Input>>>,
+    /// The run's first reading (what the model checks the others against).
+    first: Option<Arc<Reading<M::Input>>>,
     /// The last correcting reading (task 0, for the model's measurement
     /// of each step between correcting readings).
     previous_corrected: Option<Arc<Reading<M::Input>>>,
@@ -136,6 +138,7 @@ impl<M: HostedModel> Matcher<M> {
             shard: None,
             gate: M::Gate::default(),
             previous: None,
+            first: None,
             previous_corrected: None,
             queued: VecDeque::new(),
             pending: None,
@@ -247,6 +250,10 @@ impl<M: HostedModel> Matcher<M> {
     ) -> Result<(), BoxError> {
         let (task, tasks) = (self.task as u32, self.tasks as u32);
         let mark = self.model.mark(&reading.input);
+        if let Err(why) = self.model.admit(self.first.as_deref().map(|r| &*r.input), &reading.input) {
+            return Err(format!("pf.matcher: reading {} (stamp {}): {why}", reading.step, mark.0).into());
+        }
+        self.first.get_or_insert_with(|| reading.clone());
         let Some(previous) = self.previous.replace(reading.clone()) else {
             let n = self.model.particles();
             let state = self.model.start(&reading.input);

@@ -414,7 +414,12 @@ impl Bolt for Resampler {
 
     async fn finish(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         let (Some(population), Some(settings)) = (&self.population, &self.settings) else {
-            return Ok(());
+            // Nothing to estimate from is a failed run, not an empty
+            // success: an empty log, a log of odometry alone, a topic
+            // that matches nothing.
+            return Err("pf.resampler: no reading arrived, so nothing was estimated (a source without \
+                        scans: an empty log, odometry alone, or a topic or stream that matches none)"
+                .into());
         };
         let lineage = population.best_trajectory();
         out.count("processed_scans", lineage.len() as u64);
