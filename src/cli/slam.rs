@@ -64,15 +64,6 @@ fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
             }
         }
         Some(path) => {
-            // Read here, before the run, unless workers elsewhere read it.
-            if args.cluster.is_none() {
-                let readable = match std::fs::metadata(path) {
-                    Ok(m) if m.is_dir() => std::fs::read_dir(path).map(drop),
-                    Ok(_) => std::fs::File::open(path).map(drop),
-                    Err(e) => Err(e),
-                };
-                readable.map_err(|e| format!("--log {}: cannot read: {e}", path.display()))?;
-            }
             let name = path.to_string_lossy();
             let is_carmen = name.ends_with(".clf") || name.ends_with(".clf.gz") || name.ends_with(".gz");
             let (kind, key) = if is_carmen { ("carmen", "log") } else { ("rosbag2", "bag") };
@@ -115,6 +106,19 @@ pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
 
 /// Runs `squall slam`.
 pub(super) fn slam(args: &SlamArgs) -> ExitCode {
+    // The log is read here, before the run, unless workers elsewhere read
+    // it (`squall study` checks these settings before its logs exist).
+    if let (Some(path), None) = (&args.log, &args.cluster) {
+        let readable = match std::fs::metadata(path) {
+            Ok(m) if m.is_dir() => std::fs::read_dir(path).map(drop),
+            Ok(_) => std::fs::File::open(path).map(drop),
+            Err(e) => Err(e),
+        };
+        if let Err(e) = readable {
+            eprintln!("error: --log {}: cannot read: {e}", path.display());
+            return ExitCode::from(EXIT_INVALID);
+        }
+    }
     match topology(args) {
         Ok(topology) => run::run(&topology, Some(args.out.clone()), false, args.cluster.as_deref()),
         Err(code) => code,
