@@ -121,54 +121,46 @@ fn unknown_set_paths_are_rejected() {
     assert_eq!(out.status.code(), Some(2));
 }
 
+/// A component's (received, emitted, lost) in a run's metrics.json, lost
+/// being dropped plus undelivered.
+fn counts(metrics: &serde_json::Value, name: &str) -> (u64, u64, u64) {
+    let c = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
+    let count = |key: &str| c[key].as_u64().unwrap();
+    (count("received"), count("emitted"), count("dropped") + count("undelivered"))
+}
+
 #[test]
 fn a_panicking_bolt_fails_the_run_naming_it() {
     let dir = out_dir("panic");
-    let out = squall(&[
-        "run",
-        "examples/topologies/probe.toml",
-        "--set",
-        "source.params.count=1000",
-        "--set",
-        "relay.params.panic_at=100",
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    let stderr = text(&out.stderr);
-    assert!(
-        stderr
-            .contains("error: the run failed: bolt \"relay\" task 0 panicked: injected panic at message 100"),
-        "{stderr}"
-    );
     // Metrics are written for a failed run too, say so, and add up as
     // they stood when it failed: every tuple a component emitted was
     // received downstream or counted lost (three runs: which task
     // reported last used to vary).
     for run in 0..3 {
-        if run > 0 {
-            let out = squall(&[
-                "run",
-                "examples/topologies/probe.toml",
-                "--set",
-                "source.params.count=1000",
-                "--set",
-                "relay.params.panic_at=100",
-                "--out",
-                dir.to_str().unwrap(),
-            ]);
-            assert_eq!(out.status.code(), Some(1));
-        }
+        let out = squall(&[
+            "run",
+            "examples/topologies/probe.toml",
+            "--set",
+            "source.params.count=1000",
+            "--set",
+            "relay.params.panic_at=100",
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert_eq!(out.status.code(), Some(1));
+        let stderr = text(&out.stderr);
+        assert!(
+            stderr.contains(
+                "error: the run failed: bolt \"relay\" task 0 panicked: injected panic at message 100"
+            ),
+            "{stderr}"
+        );
         let metrics: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
         assert_eq!(metrics["status"], "failed");
         assert_eq!(metrics["error"], "bolt \"relay\" task 0 panicked: injected panic at message 100");
-        let component = |name: &str| {
-            let c = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
-            let count = |key: &str| c[key].as_u64().unwrap();
-            (count("received"), count("emitted"), count("dropped") + count("undelivered"))
-        };
-        let (source, relay, sink) = (component("source"), component("relay"), component("sink"));
+        let (source, relay, sink) =
+            (counts(&metrics, "source"), counts(&metrics, "relay"), counts(&metrics, "sink"));
         assert_eq!(source.1, 1000, "run {run}: {metrics}");
         assert_eq!(relay.0 + relay.2, source.1, "run {run}: relay (received, emitted, lost) {relay:?}");
         assert_eq!(relay.0, 100, "run {run}: the tuple that panicked was received");
@@ -270,11 +262,6 @@ fn catches(pid: u32, number: u32) -> bool {
         .is_some_and(|mask| mask & (1 << (number - 1)) != 0)
 }
 
-/// Whether process `pid` handles SIGINT (2).
-fn catches_sigint(pid: u32) -> bool {
-    catches(pid, 2)
-}
-
 #[test]
 fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     let dir = out_dir("ctrl-c");
@@ -293,7 +280,7 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     let stderr = || std::fs::read_to_string(&log).unwrap_or_default();
     // Interrupt once the handler is in place and both queues have filled.
     let limit = Duration::from_secs(60);
-    wait_for("the Ctrl-C handler", limit, || catches_sigint(child.id()), stderr);
+    wait_for("the Ctrl-C handler", limit, || catches(child.id(), 2), stderr);
     wait_for("3000 probes sent", limit, || logged_progress(&stderr()).is_some_and(|n| n >= 3000), stderr);
     let sent_before = logged_progress(&stderr()).unwrap();
     let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
@@ -304,11 +291,7 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     assert!(stderr.contains("stopping on Ctrl-C") && stderr.contains("stopped early"), "{stderr}");
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
-    let component = |name: &str| {
-        let c = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
-        let count = |key: &str| c[key].as_u64().unwrap();
-        (count("received"), count("emitted"), count("dropped") + count("undelivered"))
-    };
+    let component = |name: &str| counts(&metrics, name);
     let (_, emitted, _) = component("source");
     assert!(emitted >= sent_before, "{emitted} probes sent, but {sent_before} were logged before Ctrl-C");
     // Everything the source sent before it stopped went through, although

@@ -34,15 +34,13 @@ pub(crate) fn pace(rate: Option<&toml::Value>) -> Result<Pace, ParamError> {
 #[error(
     "stamp {} lies {} s after the first record's ({}): replayed at rate {factor}, \
      the wait cannot be timed; replay with rate = \"max\" or fix the stamp",
-    readable_number(*.stamp), readable_number(*.gap), readable_number(*.first)
+    readable_number(*.stamp), readable_number(.stamp - .first), readable_number(*.first)
 )]
 pub struct PaceError {
     /// The record's stamp, seconds.
     pub stamp: f64,
     /// The first record's stamp.
     pub first: f64,
-    /// Their difference.
-    pub gap: f64,
     /// The rate factor.
     pub factor: f64,
 }
@@ -77,7 +75,7 @@ impl Pacer {
         let due = Duration::try_from_secs_f64((gap / factor).max(0.0))
             .ok()
             .and_then(|wait| start.checked_add(wait))
-            .ok_or(PaceError { stamp, first, gap, factor })?;
+            .ok_or(PaceError { stamp, first, factor })?;
         let sleep = tokio::time::sleep_until(due.into());
         match &self.stop {
             None => {

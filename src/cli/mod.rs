@@ -221,14 +221,23 @@ fn report_invalid(spec: Result<TopologySpec, SpecErrors>) -> Result<Topology, Ex
 }
 
 /// Parses the command line. Every option takes negative numbers as
-/// values, so that `--particles -1` is refused by its own check ("must be
-/// at least 1") rather than read as an unknown flag `-1`.
+/// values, so that `--particles -1` is refused as a value of
+/// `--particles` (not a count) rather than read as an unknown flag `-1`.
 fn parse_args() -> Result<Cli, clap::Error> {
     fn negatives(command: clap::Command) -> clap::Command {
         command.mut_args(|a| a.allow_negative_numbers(true)).mut_subcommands(negatives)
     }
     let matches = negatives(Cli::command()).try_get_matches()?;
     Cli::from_arg_matches(&matches)
+}
+
+/// Checks before a run that `--out DIR` can be written (created if
+/// missing); the error is printed and is exit code 2.
+fn writable_out(dir: &std::path::Path) -> Result<(), ExitCode> {
+    squall_topology::fsio::check_writable_dir(dir).map_err(|e| {
+        eprintln!("error: --out {}: cannot write there: {e}", dir.display());
+        ExitCode::from(EXIT_INVALID)
+    })
 }
 
 /// Writes to stdout for `out!` and `outln!`. A closed pipe ends the

@@ -4,10 +4,10 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use squall_topology::fsio::{check_writable_dir, write_atomic};
+use squall_topology::fsio::write_atomic;
 use squall_topology::{Progress, RunError, RunOptions, RunReport, StopRequest, Topology};
 
-use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay};
+use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay, writable_out};
 
 /// Scores a finished run from the files it wrote in the output folder:
 /// (key, value) for metrics.json, or what went wrong.
@@ -34,10 +34,9 @@ pub(super) fn run_scored(
     scorer: Option<Scorer>,
 ) -> ExitCode {
     if let Some(dir) = &out
-        && let Err(e) = check_writable_dir(dir)
+        && let Err(code) = writable_out(dir)
     {
-        eprintln!("error: --out {}: cannot write there: {e}", dir.display());
-        return ExitCode::from(EXIT_INVALID);
+        return code;
     }
     let progress = Arc::new(Progress::default());
     let options =

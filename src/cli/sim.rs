@@ -72,9 +72,8 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    if let Err(e) = squall_topology::fsio::check_writable_dir(&args.out) {
-        eprintln!("error: --out {}: cannot write there: {e}", args.out.display());
-        return ExitCode::from(EXIT_INVALID);
+    if let Err(code) = super::writable_out(&args.out) {
+        return code;
     }
     match write_run(sim, &args.out) {
         Ok(s) => {

@@ -120,9 +120,8 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
         eprintln!("error: --particles and --matchers need at least one value each, matchers ≥ 1");
         return ExitCode::from(EXIT_INVALID);
     }
-    if let Err(e) = squall_topology::fsio::check_writable_dir(&args.out) {
-        eprintln!("error: --out {}: cannot write there: {e}", args.out.display());
-        return ExitCode::from(EXIT_INVALID);
+    if let Err(code) = super::writable_out(&args.out) {
+        return code;
     }
     let mut matchers = args.matchers.clone();
     matchers.sort_unstable();

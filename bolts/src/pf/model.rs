@@ -195,9 +195,9 @@ pub struct Correction {
     /// Work spent (for SLAM: pose evaluations).
     pub evaluations: u32,
     /// How well the reading fits, on a scale that does not grow with the
-    /// reading's size (for CGR: the log-likelihood per point, over the
-    /// points not seen in front of their wall); what augmented MCL
-    /// averages; −∞ when the reading says nothing. Models without
+    /// reading's size (for CGR: the log-likelihood per point, see
+    /// `CgrOptions::occlusion_fits`); what augmented MCL averages; −∞ when
+    /// the reading holds nothing to fit. Models without
     /// injection may repeat the log-likelihood.
     pub fit: Real,
 }

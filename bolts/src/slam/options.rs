@@ -275,9 +275,7 @@ impl SlamOptions {
         ] {
             positive(n, v)?;
         }
-        // One pointer per tile of 32 × 32 cells, over the bound's square.
-        let tiles_a_side = self.max_map_m / self.delta / crate::slam::grid::TILE_SIDE as Real;
-        let index_bytes = tiles_a_side * tiles_a_side * std::mem::size_of::<usize>() as Real;
+        let index_bytes = crate::slam::grid::TiledGrid::index_bytes(self.max_map_m, self.delta);
         if index_bytes > MAX_INDEX_BYTES {
             return Err(Error::Setting(format!(
                 "a {} m map of {} m cells needs {:.3e} bytes of tile index per particle (at most {} MiB): \

@@ -181,27 +181,20 @@ impl LineParser {
 
     fn apply_param(&mut self, name: &str, value: &str) -> Result<(), RecordError> {
         use std::f64::consts::{PI, TAU};
-        // Each with what a laser's geometry can be: a first beam within a
-        // turn either way, a nonzero step of at most half a turn, a
-        // positive range. NaN fails every test.
-        type Valid = fn(Real) -> bool;
-        let (target, valid, expected): (_, Valid, _) = match name {
-            "laser_front_laser_angle_min" => {
-                (&mut self.front.angle_min, |v| v.abs() <= TAU, "an angle in [-2π, 2π]")
-            }
-            "laser_front_laser_angle_increment" => {
-                (&mut self.front.angle_increment, |v| v != 0.0 && v.abs() <= PI, "a nonzero step in [-π, π]")
-            }
-            "robot_front_laser_max" => {
-                (&mut self.front.range_max, |v| v > 0.0 && v.is_finite(), "a range > 0")
-            }
-            "laser_rear_laser_angle_min" => {
-                (&mut self.rear.angle_min, |v| v.abs() <= TAU, "an angle in [-2π, 2π]")
-            }
-            "laser_rear_laser_angle_increment" => {
-                (&mut self.rear.angle_increment, |v| v != 0.0 && v.abs() <= PI, "a nonzero step in [-π, π]")
-            }
-            "robot_rear_laser_max" => (&mut self.rear.range_max, |v| v > 0.0 && v.is_finite(), "a range > 0"),
+        // What a laser's geometry can be: a first beam within a turn either
+        // way, a nonzero step of at most half a turn, a positive range.
+        // NaN fails every test.
+        type Valid = (fn(Real) -> bool, &'static str);
+        const ANGLE: Valid = (|v| v.abs() <= TAU, "an angle in [-2π, 2π]");
+        const STEP: Valid = (|v| v != 0.0 && v.abs() <= PI, "a nonzero step in [-π, π]");
+        const RANGE: Valid = (|v| v > 0.0 && v.is_finite(), "a range > 0");
+        let (target, (valid, expected)) = match name {
+            "laser_front_laser_angle_min" => (&mut self.front.angle_min, ANGLE),
+            "laser_front_laser_angle_increment" => (&mut self.front.angle_increment, STEP),
+            "robot_front_laser_max" => (&mut self.front.range_max, RANGE),
+            "laser_rear_laser_angle_min" => (&mut self.rear.angle_min, ANGLE),
+            "laser_rear_laser_angle_increment" => (&mut self.rear.angle_increment, STEP),
+            "robot_rear_laser_max" => (&mut self.rear.range_max, RANGE),
             _ => return Ok(()),
         };
         let v: Real = value

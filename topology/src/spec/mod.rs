@@ -261,9 +261,8 @@ fn check_name(name: &str) -> Result<(), String> {
     if !(first.is_ascii_alphabetic() || first == '_')
         || !chars.all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
     {
-        let shown: String = name.chars().take(40).collect();
         return Err(format!(
-            "component name {shown:?} must be letters, digits, '_' and '-', starting with a letter or '_'"
+            "component name {name:?} must be letters, digits, '_' and '-', starting with a letter or '_'"
         ));
     }
     if name == "topology" {

@@ -118,6 +118,13 @@ impl TiledGrid {
         self.wall_threshold
     }
 
+    /// The bytes of the tile index of a square map `side` metres wide of
+    /// `resolution`-metre cells: one slot per tile, the index being dense.
+    pub(crate) fn index_bytes(side: Real, resolution: Real) -> Real {
+        let tiles_a_side = side / resolution / TILE_SIDE as Real;
+        tiles_a_side * tiles_a_side * std::mem::size_of::<Option<Arc<Tile>>>() as Real
+    }
+
     /// Metres per cell.
     pub fn resolution(&self) -> Real {
         self.resolution
