@@ -76,9 +76,9 @@ pub enum Error {
     /// A map could not be encoded as PNG.
     #[error(transparent)]
     PngEncode(#[from] png::EncodingError),
-    /// A map file could not be written. The text is the system's alone:
-    /// callers say which folder they were writing into.
-    #[error("{source}")]
+    /// A map file could not be written (a full disk, a file-size limit):
+    /// the file and the system's reason.
+    #[error("{}: cannot write: {source}", path.display())]
     Write {
         /// The file.
         path: PathBuf,

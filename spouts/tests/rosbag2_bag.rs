@@ -7,7 +7,7 @@ use common::shared;
 use squall_core::eval::relations::{self, read_relations};
 use squall_core::trajectory::Trajectory;
 use squall_spouts::carmen::{ReadOptions, read_front_scans};
-use squall_spouts::rosbag2::{BagError, Topics, read_bag};
+use squall_spouts::rosbag2::{BagError, Topics, read_bag, read_mcap_bytes};
 
 /// The bag holds the same scans as the log. Their odometry poses are
 /// interpolated at the scan stamps, as on a robot; `aces.clf` instead pairs
@@ -154,4 +154,33 @@ fn skip_bad_skips_and_counts_undecodable_messages() {
     let ok = read_bag(&path, &Topics { skip_bad: true, ..Topics::default() }).unwrap();
     assert_eq!(ok.skipped, 1);
     assert!(ok.scans.len() >= 10, "{}", ok.scans.len());
+}
+
+/// A bag whose attachment's name claims 4 GB: the `mcap` crate alone
+/// would allocate and zero that much before finding the record too short
+/// (found by `fuzz/`'s `mcap_bag` target); squall refuses the record,
+/// naming it, without the allocation.
+#[test]
+fn a_length_past_its_record_is_refused_before_it_is_allocated() {
+    let mut w = mcap::Writer::new(std::io::Cursor::new(Vec::new())).unwrap();
+    let attachment = mcap::Attachment {
+        log_time: 1,
+        create_time: 1,
+        name: "calibration".into(),
+        media_type: "text/plain".into(),
+        data: std::borrow::Cow::Borrowed(b"fx 615"),
+    };
+    w.attach(&attachment).unwrap();
+    w.finish().unwrap();
+    let mut bytes = w.into_inner().into_inner();
+    let name = bytes.windows(15).position(|b| b == b"\x0b\0\0\0calibration").unwrap();
+    bytes[name..name + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let path = std::path::Path::new("evil.mcap");
+    let error = read_mcap_bytes(path, &bytes, &Topics::default()).unwrap_err().to_string();
+    assert!(
+        error.contains(
+            "evil.mcap: malformed MCAP after message 0: record 0x09, field 3: claims 4294967295 bytes"
+        ),
+        "{error}"
+    );
 }

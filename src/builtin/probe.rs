@@ -1,7 +1,7 @@
 //! The throughput probe: `probe.source → probe.relay → probe.sink`, with a
 //! configurable message size, count and rate. It measures the engine itself
 //! (messages/s, end-to-end latency) and injects faults for tests (slow,
-//! failing or panicking bolts).
+//! failing, panicking, hanging or leaking bolts; a source that errors).
 
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -55,6 +55,9 @@ struct SourceParams {
     /// Distinct keys. The default is 1024.
     #[serde(default = "default_keys")]
     keys: u64,
+    /// Fail with an error (as a source whose input breaks) when about to
+    /// emit the n-th message (1-based); absent = never.
+    fail_at: Option<u64>,
 }
 
 fn default_count() -> u64 {
@@ -128,6 +131,9 @@ impl Spout for ProbeSource {
         let padding = self.params.message_bytes - HEADER_BYTES;
         for _ in 0..burst {
             let seq = self.next_seq;
+            if self.params.fail_at == Some(seq + 1) {
+                return Err(format!("injected source error at message {}", seq + 1).into());
+            }
             self.next_seq += 1;
             let probe =
                 Probe { seq, key: seq % self.params.keys, sent_ns: now_ns(), payload: vec![0; padding] };
@@ -141,6 +147,9 @@ impl Spout for ProbeSource {
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Fault {
+    /// What `leak_kib` has kept.
+    #[serde(skip)]
+    leaked: Vec<Vec<u8>>,
     /// Sleep this long per message (a slow bolt).
     #[serde(default)]
     delay_us: u64,
@@ -149,16 +158,30 @@ struct Fault {
     /// Fail (for replay) the first n messages it sees.
     #[serde(default)]
     fail_first: u64,
+    /// Stop making progress on the n-th message: never return from it.
+    hang_at: Option<u64>,
+    /// Keep this many KiB allocated for every message seen (a leak).
+    #[serde(default)]
+    leak_kib: u64,
 }
 
 impl Fault {
-    fn apply(&self, seen: u64, out: &mut Emitter) {
+    fn apply(&mut self, seen: u64, out: &mut Emitter) {
         if self.delay_us > 0 {
             // Blocking is fine: every task has its own thread.
             std::thread::sleep(Duration::from_micros(self.delay_us));
         }
         if self.panic_at == Some(seen) {
             panic!("injected panic at message {seen}");
+        }
+        if self.hang_at == Some(seen) {
+            loop {
+                std::thread::park();
+            }
+        }
+        if self.leak_kib > 0 {
+            // Touched, so that it is resident, not only reserved.
+            self.leaked.push(vec![1u8; (self.leak_kib as usize) << 10]);
         }
         if seen <= self.fail_first {
             out.fail();

@@ -9,7 +9,7 @@ use squall_core::geometry::Pose2;
 use squall_core::trajectory::Trajectory;
 
 use squall_spouts::sim::{Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for, top_speed_for};
-use squall_topology::{Override, TopologySpec};
+use squall_topology::{Override, Topology};
 
 use super::eval::print_map_frame;
 use super::{EXIT_INVALID, report_invalid, run};
@@ -265,7 +265,12 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let spec = TopologySpec::parse_with("localize.toml (built in)", LOCALIZE_TOML, &overrides);
+    let spec = Topology::from_text(
+        "localize.toml (built in)",
+        LOCALIZE_TOML,
+        &overrides,
+        &squall::builtin::registry(),
+    );
     let scorer = |dir: &Path| score(dir, &route);
     match report_invalid(spec) {
         Ok(topology) => run::run_scored(&topology, Some(args.out.clone()), false, None, Some(&scorer)),

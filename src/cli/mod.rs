@@ -37,7 +37,7 @@ use std::process::ExitCode;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use squall_topology::spec::SpecErrors;
-use squall_topology::{Override, Topology, TopologySpec};
+use squall_topology::{Override, Topology};
 
 /// Exit code for an invalid topology or usage error.
 const EXIT_INVALID: u8 = 2;
@@ -141,6 +141,14 @@ enum Command {
 /// Parses arguments, runs the command, maps errors to exit codes.
 pub(crate) fn main() -> ExitCode {
     init_logging();
+    // A write past a file-size limit (`ulimit -f`, a quota) then fails
+    // with an error naming the file, instead of the signal killing the
+    // process with nothing reported.
+    // SAFETY: setting a signal's disposition to "ignore" before any
+    // thread starts; no handler runs.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
     let cli = match parse_args() {
         Ok(cli) => cli,
         Err(e) => {
@@ -151,9 +159,22 @@ pub(crate) fn main() -> ExitCode {
     match cli.command {
         Command::Run { topology, out, quiet, cluster } => match load(&topology) {
             Ok(t) => run::run(&t, out, quiet, cluster.as_deref()),
-            Err(code) => code,
+            Err(code) => {
+                // An unusable --out is reported with the topology's errors.
+                if let Some(dir) = &out {
+                    let _ = writable_out(dir);
+                }
+                code
+            }
         },
         Command::Validate { topology } => match load(&topology) {
+            Ok(t) if !t.unreadable_inputs().is_empty() => {
+                for error in t.unreadable_inputs() {
+                    eprintln!("{error}");
+                }
+                eprintln!("error: the topology is valid, but it reads files that cannot be read here");
+                ExitCode::from(EXIT_INVALID)
+            }
             Ok(t) => {
                 let tasks: usize = t.spec().components.iter().map(|c| c.parallelism).sum();
                 outln!(
@@ -201,14 +222,11 @@ pub(crate) fn main() -> ExitCode {
 /// Parses and validates a topology; on failure prints every error and
 /// returns the exit code.
 fn load(args: &TopologyArgs) -> Result<Topology, ExitCode> {
-    report_invalid(TopologySpec::load(&args.file, &args.overrides))
+    report_invalid(Topology::load(&args.file, &args.overrides, &squall::builtin::registry()))
 }
 
-/// Validates a parsed (or failed) spec against the built-in kinds; on
-/// failure prints every error and returns the exit code.
-fn report_invalid(spec: Result<TopologySpec, SpecErrors>) -> Result<Topology, ExitCode> {
-    let registry = squall::builtin::registry();
-    let validated = spec.and_then(|spec| Topology::validate(spec, &registry));
+/// A topology, or every error found in it printed and the exit code.
+fn report_invalid(validated: Result<Topology, SpecErrors>) -> Result<Topology, ExitCode> {
     validated.map_err(|errors: SpecErrors| {
         eprintln!("{errors}");
         eprintln!(

@@ -33,10 +33,20 @@ pub(super) fn run_scored(
     cluster: Option<&Path>,
     scorer: Option<Scorer>,
 ) -> ExitCode {
-    if let Some(dir) = &out
-        && let Err(code) = writable_out(dir)
-    {
-        return code;
+    // Everything a run in this process needs, checked before it starts and
+    // reported together: the inputs the components read, and --out.
+    let mut invalid = false;
+    if cluster.is_none() {
+        for error in topology.unreadable_inputs() {
+            eprintln!("{error}");
+            invalid = true;
+        }
+    }
+    if let Some(dir) = &out {
+        invalid |= writable_out(dir).is_err();
+    }
+    if invalid {
+        return ExitCode::from(EXIT_INVALID);
     }
     let progress = Arc::new(Progress::default());
     let options =
@@ -60,13 +70,11 @@ pub(super) fn run_scored(
     if options.stop.is_made() {
         eprintln!("note: stopped early (Ctrl-C or SIGTERM); everything already emitted was processed");
     }
-    let (report, failure) = match result {
+    let (report, failure) = match result.map_err(RunError::into_parts) {
         Ok(report) => (report, None),
-        Err(RunError::TaskFailed { report, role, component, task, message }) => {
-            (*report, Some(format!("{role} \"{component}\" task {task} {message}")))
-        }
-        Err(e) => {
-            eprintln!("error: {e}");
+        Err((message, Some(report))) => (report, Some(message)),
+        Err((message, None)) => {
+            eprintln!("error: {message}");
             return ExitCode::from(EXIT_FAILED);
         }
     };

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use squall_topology::{Override, Topology, TopologySpec};
+use squall_topology::{Override, Topology};
 
 use super::{EXIT_INVALID, report_invalid, run};
 
@@ -98,8 +98,10 @@ pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
         ExitCode::from(EXIT_INVALID)
     })?;
     let spec = match &args.topology {
-        Some(file) => TopologySpec::load(file, &overrides),
-        None => TopologySpec::parse_with("slam.toml (built in)", SLAM_TOML, &overrides),
+        Some(file) => Topology::load(file, &overrides, &squall::builtin::registry()),
+        None => {
+            Topology::from_text("slam.toml (built in)", SLAM_TOML, &overrides, &squall::builtin::registry())
+        }
     };
     report_invalid(spec)
 }

@@ -1,6 +1,7 @@
 //! What a component declares about itself: output streams, accepted inputs,
 //! a peer message type and a tick period.
 
+use std::path::PathBuf;
 use std::time::Duration;
 
 use crate::message::{Message, MessageType};
@@ -56,6 +57,7 @@ pub struct Declarer {
     pub(crate) accepts: Accepts,
     pub(crate) peer: Option<MessageType>,
     pub(crate) tick: Option<Duration>,
+    pub(crate) reads: Vec<PathBuf>,
 }
 
 impl Declarer {
@@ -99,6 +101,20 @@ impl Declarer {
     pub fn peer_message(&mut self, message: MessageType) -> &mut Self {
         self.peer = Some(message);
         self
+    }
+
+    /// Declares a file or folder this component reads (a log, a bag, a
+    /// map). A run in this process checks it can be read before any task
+    /// starts ([`crate::Topology::unreadable_inputs`]): a missing file is
+    /// invalid input, reported with the rest, not a run that fails later.
+    pub fn reads(&mut self, path: impl Into<PathBuf>) -> &mut Self {
+        self.reads.push(path.into());
+        self
+    }
+
+    /// The files and folders declared read.
+    pub fn read_paths(&self) -> &[PathBuf] {
+        &self.reads
     }
 
     /// Asks for a tick every `period`. A topology file's `tick_secs`

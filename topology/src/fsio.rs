@@ -59,6 +59,12 @@ fn remove_stale(dir: &Path, prefix: &str) {
     }
 }
 
+/// Checks before a run that an input can be read: a file opens, a
+/// folder lists.
+pub fn check_readable(path: &Path) -> io::Result<()> {
+    if path.is_dir() { fs::read_dir(path).map(drop) } else { fs::File::open(path).map(drop) }
+}
+
 /// Checks before a run that outputs can be written into `dir` (created
 /// if missing): creates and removes a file there, so that a read-only or
 /// missing place is found before hours of work, not after.

@@ -15,7 +15,6 @@
 //! - a panic names its component and fails the run (or restarts the task);
 //! - opt-in acking replays failed or timed-out spout tuples.
 
-#[cfg(feature = "cluster")]
 pub mod cluster;
 mod component;
 mod context;

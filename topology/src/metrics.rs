@@ -9,9 +9,14 @@ use serde::Serialize;
 
 use crate::spec::Role;
 
+/// The largest value a histogram tracks: 1 hour, in ns.
+pub(crate) const HISTOGRAM_HIGHEST: u64 = 3_600_000_000_000;
+/// The significant digits a histogram keeps.
+pub(crate) const HISTOGRAM_DIGITS: u8 = 3;
+
 /// Histogram bounds: 1 ns .. 1 hour, 3 significant digits.
 pub(crate) fn new_histogram() -> Histogram<u64> {
-    Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("valid histogram bounds")
+    Histogram::new_with_bounds(1, HISTOGRAM_HIGHEST, HISTOGRAM_DIGITS).expect("valid histogram bounds")
 }
 
 /// What one task counts while it runs (owned by the task's thread).
@@ -192,6 +197,11 @@ pub struct TaskReport {
     pub abandoned: u64,
     /// The component's own metrics.
     pub custom: BTreeMap<String, CustomMetric>,
+    /// The task's thread never returned (it was stuck when the run was
+    /// abandoned): its counters could not be collected and read 0.
+    /// Written only when true.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub lost: bool,
 }
 
 /// Metrics of one component (sums over tasks; latency over all tuples).
@@ -289,6 +299,9 @@ pub(crate) struct TaskOutcome {
     pub(crate) dropped: u64,
     pub(crate) undelivered: u64,
     pub(crate) queue_depth_max: usize,
+    /// The task's thread never returned (stuck when the run was
+    /// abandoned): its counters could not be collected and read 0.
+    pub(crate) lost: bool,
 }
 
 pub(crate) fn task_report(task: usize, o: &TaskOutcome) -> TaskReport {
@@ -309,6 +322,7 @@ pub(crate) fn task_report(task: usize, o: &TaskOutcome) -> TaskReport {
         replayed: s.replayed,
         abandoned: s.abandoned,
         custom: summarize_custom(&s.custom),
+        lost: o.lost,
     }
 }
 

@@ -6,11 +6,13 @@
 //! unknown components and streams, stream/input type mismatches, grouping
 //! fields missing from the stream's type, and cycles not marked `feedback`.
 
+use std::path::Path;
+
 use crate::declare::Declarer;
 use crate::grouping::Grouping;
 use crate::params::Params;
 use crate::registry::{BoltFactory, Registry, SpoutFactory};
-use crate::spec::{ComponentSpec, Role, SpecError, SpecErrors, TopologySpec};
+use crate::spec::{ComponentSpec, Override, Role, SpecError, SpecErrors, TopologySpec};
 
 /// A validated topology, ready to run.
 #[derive(Debug, Clone)]
@@ -46,9 +48,40 @@ pub(crate) struct Planned {
 }
 
 impl Topology {
+    /// Reads a topology file, applies `overrides`, and checks it against
+    /// the kinds in `registry`, reporting the problems of every stage at
+    /// once: the file's own (settings, names, groupings) and those of each
+    /// component's params. Only a file that is not TOML stops at the first.
+    pub fn load(path: &Path, overrides: &[Override], registry: &Registry) -> Result<Self, SpecErrors> {
+        let (file, text) = crate::spec::read_file(path)?;
+        Self::from_text(&file, &text, overrides, registry)
+    }
+
+    /// [`Topology::load`] on text already read; `file` names it in errors.
+    pub fn from_text(
+        file: &str,
+        text: &str,
+        overrides: &[Override],
+        registry: &Registry,
+    ) -> Result<Self, SpecErrors> {
+        let (spec, errors) = TopologySpec::parse_partial(file, text, overrides)?;
+        Self::validate_after(spec, errors, registry)
+    }
+
     /// Checks `spec` against the kinds in `registry`.
     pub fn validate(spec: TopologySpec, registry: &Registry) -> Result<Self, SpecErrors> {
-        let mut errors = Vec::new();
+        Self::validate_after(spec, Vec::new(), registry)
+    }
+
+    /// Checks `spec`, which parsing found `errors` in, against the kinds
+    /// in `registry`: the params of every component that parsed are
+    /// checked whatever the errors; the wiring only when there are none
+    /// (a component dropped for its errors would look like a missing one).
+    fn validate_after(
+        spec: TopologySpec,
+        mut errors: Vec<SpecError>,
+        registry: &Registry,
+    ) -> Result<Self, SpecErrors> {
         let mut components = Vec::new();
         for c in &spec.components {
             if let Some(p) = instantiate(&spec, c, registry, &mut errors) {
@@ -59,7 +92,33 @@ impl Topology {
             check_inputs(&spec, &components, &mut errors);
         }
         let order = if errors.is_empty() { order_or_cycle(&spec, &components, &mut errors) } else { vec![] };
-        if errors.is_empty() { Ok(Topology { spec, components, order }) } else { Err(SpecErrors(errors)) }
+        if errors.is_empty() {
+            Ok(Topology { spec, components, order })
+        } else {
+            // In the file's order, whichever stage found them.
+            errors.sort_by_key(|e| e.line);
+            Err(SpecErrors(errors))
+        }
+    }
+
+    /// The files and folders the components declared they read
+    /// ([`Declarer::reads`]) that cannot be read here, each an error at
+    /// its component's params. What a run in this process checks before
+    /// it starts, so that a missing log is invalid input, not a failed
+    /// run. (Validation does not: a cluster's coordinator validates
+    /// topologies whose files live on its workers.)
+    pub fn unreadable_inputs(&self) -> Vec<SpecError> {
+        let mut errors = Vec::new();
+        for c in &self.components {
+            for path in &c.declared.reads {
+                if let Err(e) = crate::fsio::check_readable(path) {
+                    let at = Some((c.spec.role, c.spec.name.as_str()));
+                    let message = format!("cannot read {}: {e}", path.display());
+                    errors.push(self.spec.source.error_at_line(c.spec.params_line, at, message));
+                }
+            }
+        }
+        errors
     }
 
     /// The topology's name.

@@ -72,9 +72,8 @@ impl Bolt for MapSink {
             out.count("maps_written", 0);
             return Ok(());
         };
-        write_pgm_yaml(map, dir, &self.stem).map_err(|e| format!("{}: {e}", dir.display()))?;
-        write_png(map, &self.path, &dir.join(format!("{}.png", self.stem)))
-            .map_err(|e| format!("{}: {e}", dir.display()))?;
+        write_pgm_yaml(map, dir, &self.stem)?;
+        write_png(map, &self.path, &dir.join(format!("{}.png", self.stem)))?;
         out.count("maps_written", 1);
         Ok(())
     }

@@ -82,6 +82,7 @@ impl CarmenSpout {
 impl Spout for CarmenSpout {
     fn declare(&self, d: &mut Declarer) {
         d.output::<LaserReading>("scan").output::<LaserReading>("rear_scan").output::<Odometry>("odom");
+        d.reads(&self.log);
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {

@@ -5,13 +5,17 @@
 //! as a robot's own TF would; the laser's mounting comes from `/tf_static`.
 //! The bag is read into memory whole.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+
+use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use squall_core::geometry::{Pose2, normalize_angle};
 use squall_core::sensor::{LaserReading, Odometry};
 
 use super::cdr::CdrError;
 use super::messages::{self, Transform};
+use super::record_check;
 
 /// Scans farther than this (s) from the odometry stream's first or last
 /// message get no pose: they are counted, not guessed.
@@ -142,101 +146,193 @@ const TF_TYPE: &str = "tf2_msgs/msg/TFMessage";
 /// Reads the scans and odometry of the bag at `path` (a bag folder or one
 /// `.mcap` file).
 pub fn read_bag(path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
-    let mut raw_scans = Vec::new();
-    let mut odometry = Vec::new();
-    let mut statics: Vec<Transform> = Vec::new();
-    let mut skipped = 0;
-    // Every topic met, with its type: what a missing topic's error lists.
-    let mut seen: Vec<(String, String)> = Vec::new();
+    let mut collector = Collector::default();
     for file in mcap_files(path)? {
         let bytes = std::fs::read(&file).map_err(|source| BagError::Io { path: file.clone(), source })?;
-        let container = |index, e: mcap::McapError| BagError::Container {
-            path: file.clone(),
-            index,
-            message: e.to_string(),
-        };
-        let stream = mcap::MessageStream::new(&bytes).map_err(|e| container(0, e))?;
-        for (index, message) in stream.enumerate() {
-            let message = message.map_err(|e| container(index, e))?;
-            let topic = message.channel.topic.as_str();
-            if !seen.iter().any(|(t, _)| t == topic) {
-                let schema = message.channel.schema.as_ref().map_or("", |s| s.name.as_str());
-                seen.push((topic.to_string(), schema.to_string()));
-            }
-            let expected = if topic == topics.scan {
-                SCAN_TYPE
-            } else if topic == topics.odom {
-                ODOM_TYPE
-            } else if topic == topics.tf_static {
-                TF_TYPE
-            } else {
-                continue;
-            };
-            let schema = message.channel.schema.as_ref().map_or("", |s| s.name.as_str());
-            if schema != expected || message.channel.message_encoding != "cdr" {
-                return Err(BagError::WrongType {
-                    path: file.clone(),
-                    index,
-                    topic: topic.to_string(),
-                    schema: schema.to_string(),
-                    encoding: message.channel.message_encoding.clone(),
-                    expected,
-                });
-            }
-            let decoded = match expected {
-                SCAN_TYPE => messages::laser_scan(&message.data).map(|m| raw_scans.push(m)),
-                ODOM_TYPE => messages::odometry(&message.data).map(|o| odometry.push(o.into_odometry())),
-                _ => messages::tf_message(&message.data).map(|t| statics.extend(t)),
-            };
-            match decoded {
-                Ok(()) => {}
-                Err(_) if topics.skip_bad => skipped += 1,
-                Err(source) => {
-                    return Err(BagError::Message {
-                        path: file.clone(),
-                        index,
-                        topic: topic.to_string(),
-                        source,
-                    });
+        collector.read_mcap(&file, &bytes, topics)?;
+    }
+    collector.finish(path, topics)
+}
+
+/// Reads the scans and odometry of one MCAP file already in memory;
+/// `name` is what errors call it. What [`read_bag`] does per file, for
+/// callers (and fuzzers) holding the bytes.
+pub fn read_mcap_bytes(name: &Path, bytes: &[u8], topics: &Topics) -> Result<BagReadings, BagError> {
+    let mut collector = Collector::default();
+    collector.read_mcap(name, bytes, topics)?;
+    collector.finish(name, topics)
+}
+
+/// The largest MCAP record read (a message, or a chunk's compressed
+/// bytes): far above a scan's or an image's, far below what a corrupt
+/// length could make the reader buffer.
+const MAX_RECORD_BYTES: usize = 256 << 20;
+
+/// A channel of an MCAP file: its topic, message encoding and schema name
+/// (empty without a schema).
+struct Channel {
+    topic: String,
+    encoding: String,
+    schema: String,
+}
+
+/// The messages of a bag's files gathered so far, before the scans are
+/// given poses.
+#[derive(Default)]
+struct Collector {
+    raw_scans: Vec<messages::LaserScan>,
+    odometry: Vec<Odometry>,
+    statics: Vec<Transform>,
+    skipped: u64,
+    /// Every topic met, with its type: what a missing topic's error lists.
+    seen: Vec<(String, String)>,
+}
+
+impl Collector {
+    /// Gathers the messages of one MCAP file, `file` naming it in errors.
+    ///
+    /// Records are read one at a time by the `mcap` crate's streaming
+    /// reader (chunks decompressed as they are read), each checked by
+    /// [`record_check`] before the crate parses it.
+    fn read_mcap(&mut self, file: &Path, bytes: &[u8], topics: &Topics) -> Result<(), BagError> {
+        let container =
+            |index, message: String| BagError::Container { path: file.to_path_buf(), index, message };
+        let options = LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES);
+        let mut reader = LinearReader::new_with_options(options);
+        let mut unread = bytes;
+        let mut schemas: HashMap<u16, String> = HashMap::new();
+        let mut channels: HashMap<u16, Channel> = HashMap::new();
+        let mut index = 0;
+        while let Some(event) = reader.next_event() {
+            match event.map_err(|e| container(index, e.to_string()))? {
+                LinearReadEvent::ReadRequest(wanted) => {
+                    let n = wanted.min(unread.len());
+                    reader.insert(n).copy_from_slice(&unread[..n]);
+                    reader.notify_read(n);
+                    unread = &unread[n..];
+                }
+                LinearReadEvent::Record { opcode, data } => {
+                    record_check::check(opcode, data).map_err(|m| container(index, m))?;
+                    match mcap::parse_record(opcode, data).map_err(|e| container(index, e.to_string()))? {
+                        mcap::records::Record::Schema { header, .. } => {
+                            schemas.insert(header.id, header.name);
+                        }
+                        mcap::records::Record::Channel(c) => {
+                            let schema = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                            channels.insert(
+                                c.id,
+                                Channel { topic: c.topic, encoding: c.message_encoding, schema },
+                            );
+                        }
+                        mcap::records::Record::Message { header, data } => {
+                            let channel = channels.get(&header.channel_id).ok_or_else(|| {
+                                container(
+                                    index,
+                                    format!("a message on channel {}, never declared", header.channel_id),
+                                )
+                            })?;
+                            self.message(file, index, channel, &data, topics)?;
+                            index += 1;
+                        }
+                        _ => {}
+                    }
                 }
             }
         }
+        Ok(())
     }
-    let has = |topic: &str| seen.iter().any(|(t, _)| t == topic);
-    for (param, topic) in [("scan_topic", &topics.scan), ("odom_topic", &topics.odom)] {
-        if !has(topic) {
-            let present = seen.iter().map(|(t, ty)| format!("{t} ({ty})")).collect::<Vec<_>>().join(", ");
-            let present = if present.is_empty() { "none".to_string() } else { present };
-            return Err(BagError::MissingTopic {
-                path: path.to_path_buf(),
-                param,
+
+    /// Takes message `index` of `file`, on `channel`, if its topic is one
+    /// the readings need.
+    fn message(
+        &mut self,
+        file: &Path,
+        index: usize,
+        channel: &Channel,
+        data: &[u8],
+        topics: &Topics,
+    ) -> Result<(), BagError> {
+        let Channel { topic, encoding, schema } = channel;
+        if !self.seen.iter().any(|(t, _)| t == topic) {
+            self.seen.push((topic.clone(), schema.clone()));
+        }
+        let expected = if *topic == topics.scan {
+            SCAN_TYPE
+        } else if *topic == topics.odom {
+            ODOM_TYPE
+        } else if *topic == topics.tf_static {
+            TF_TYPE
+        } else {
+            return Ok(());
+        };
+        if schema != expected || encoding != "cdr" {
+            return Err(BagError::WrongType {
+                path: file.to_path_buf(),
+                index,
                 topic: topic.clone(),
-                present,
+                schema: schema.clone(),
+                encoding: encoding.clone(),
+                expected,
             });
         }
-    }
-    if !has(&topics.tf_static) {
-        tracing::warn!(
-            bag = %path.display(),
-            "no messages on tf_static_topic \"{}\": the laser is taken to sit at the robot's origin",
-            topics.tf_static
-        );
-    }
-    odometry.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
-    raw_scans.sort_by(|a, b| a.header.stamp.total_cmp(&b.header.stamp));
-    let mut out = BagReadings { odometry, skipped, ..Default::default() };
-    for scan in raw_scans {
-        let Some(pose) = interpolate(&out.odometry, scan.header.stamp) else {
-            out.scans_without_odometry += 1;
-            continue;
+        let decoded = match expected {
+            SCAN_TYPE => messages::laser_scan(data).map(|m| self.raw_scans.push(m)),
+            ODOM_TYPE => messages::odometry(data).map(|o| self.odometry.push(o.into_odometry())),
+            _ => messages::tf_message(data).map(|t| self.statics.extend(t)),
         };
-        let laser_offset = statics
-            .iter()
-            .find(|t| t.child_frame_id == scan.header.frame_id)
-            .map_or(Pose2::IDENTITY, |t| t.pose);
-        out.scans.push(scan.into_reading(pose, laser_offset));
+        match decoded {
+            Ok(()) => Ok(()),
+            Err(_) if topics.skip_bad => {
+                self.skipped += 1;
+                Ok(())
+            }
+            Err(source) => {
+                Err(BagError::Message { path: file.to_path_buf(), index, topic: topic.clone(), source })
+            }
+        }
     }
-    Ok(out)
+
+    /// The readings of the bag at `path`: every scan with its pose
+    /// interpolated from odometry and its laser's mounting; an error if a
+    /// topic the readings need never appeared.
+    fn finish(self, path: &Path, topics: &Topics) -> Result<BagReadings, BagError> {
+        let Collector { mut raw_scans, mut odometry, statics, skipped, seen } = self;
+        let has = |topic: &str| seen.iter().any(|(t, _)| t == topic);
+        for (param, topic) in [("scan_topic", &topics.scan), ("odom_topic", &topics.odom)] {
+            if !has(topic) {
+                let present = seen.iter().map(|(t, ty)| format!("{t} ({ty})")).collect::<Vec<_>>().join(", ");
+                let present = if present.is_empty() { "none".to_string() } else { present };
+                return Err(BagError::MissingTopic {
+                    path: path.to_path_buf(),
+                    param,
+                    topic: topic.clone(),
+                    present,
+                });
+            }
+        }
+        if !has(&topics.tf_static) {
+            tracing::warn!(
+                bag = %path.display(),
+                "no messages on tf_static_topic \"{}\": the laser is taken to sit at the robot's origin",
+                topics.tf_static
+            );
+        }
+        odometry.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
+        raw_scans.sort_by(|a, b| a.header.stamp.total_cmp(&b.header.stamp));
+        let mut out = BagReadings { odometry, skipped, ..Default::default() };
+        for scan in raw_scans {
+            let Some(pose) = interpolate(&out.odometry, scan.header.stamp) else {
+                out.scans_without_odometry += 1;
+                continue;
+            };
+            let laser_offset = statics
+                .iter()
+                .find(|t| t.child_frame_id == scan.header.frame_id)
+                .map_or(Pose2::IDENTITY, |t| t.pose);
+            out.scans.push(scan.into_reading(pose, laser_offset));
+        }
+        Ok(out)
+    }
 }
 
 /// The odometry pose at `t`, linear in position and along the shorter arc in

@@ -7,6 +7,7 @@
 mod bag;
 mod cdr;
 pub mod messages;
+mod record_check;
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -15,7 +16,7 @@ use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry};
 use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
 
-pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag};
+pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag, read_mcap_bytes};
 pub use cdr::CdrError;
 
 use crate::pace::{Pacer, pace};
@@ -89,6 +90,7 @@ impl Rosbag2Spout {
 impl Spout for Rosbag2Spout {
     fn declare(&self, d: &mut Declarer) {
         d.output::<LaserReading>("scan").output::<Odometry>("odom");
+        d.reads(&self.bag);
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {

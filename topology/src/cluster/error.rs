@@ -53,6 +53,7 @@ pub enum HostError {
     ControlClosed(String),
 }
 
+#[cfg(feature = "cluster")]
 impl HostError {
     /// zenoh's error `reason` while the host was `doing` something.
     pub(crate) fn transport(doing: impl Into<String>, reason: impl std::fmt::Display) -> Self {

@@ -1,13 +1,17 @@
 //! Task metrics as they travel from a worker to the coordinator.
 
+#[cfg(feature = "cluster")]
 use std::collections::BTreeMap;
+#[cfg(feature = "cluster")]
 use std::time::Duration;
 
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
 
 use crate::cluster::wire::WireError;
-use crate::metrics::{Custom, TaskOutcome, TaskStats, new_histogram};
+#[cfg(feature = "cluster")]
+use crate::metrics::{Custom, TaskOutcome, TaskStats};
+use crate::metrics::{HISTOGRAM_DIGITS, HISTOGRAM_HIGHEST, new_histogram};
 
 /// A task's outcome as it travels from a worker to the coordinator:
 /// histograms in HdrHistogram's portable V2 encoding.
@@ -36,6 +40,7 @@ enum CustomWire {
     Values(Vec<u8>),
 }
 
+#[cfg(feature = "cluster")]
 fn histogram_bytes(h: &Histogram<u64>) -> Vec<u8> {
     use hdrhistogram::serialization::Serializer;
     let mut bytes = Vec::new();
@@ -45,7 +50,39 @@ fn histogram_bytes(h: &Histogram<u64>) -> Vec<u8> {
     bytes
 }
 
-fn histogram_from(bytes: &[u8]) -> Result<Histogram<u64>, WireError> {
+/// The V2 encoding's cookie (uncompressed; squall never sends the
+/// compressed form).
+const V2_COOKIE: u32 = 0x1c84_9313;
+/// The V2 header's size: cookie, payload length, normalizing offset,
+/// significant digits, lowest, highest, conversion ratio.
+const V2_HEADER: usize = 40;
+
+/// A histogram from a peer, in HdrHistogram's portable V2 encoding,
+/// decoded and checked to fit squall's bounds.
+///
+/// The header is checked first: the hdrhistogram crate allocates the
+/// payload length and the counts its bounds imply before reading, so a
+/// 50-byte frame could claim gigabytes (found by `fuzz/`'s
+/// `cluster_frames` target).
+pub fn decode_histogram(bytes: &[u8]) -> Result<Histogram<u64>, WireError> {
+    let be32 = |at: usize| bytes.get(at..at + 4).map(|b| u32::from_be_bytes(b.try_into().expect("4 bytes")));
+    let be64 = |at: usize| bytes.get(at..at + 8).map(|b| u64::from_be_bytes(b.try_into().expect("8 bytes")));
+    let (Some(cookie), Some(payload), Some(digits), Some(highest)) = (be32(0), be32(4), be32(12), be64(24))
+    else {
+        return Err(WireError::Histogram(format!("{} bytes, shorter than a V2 header", bytes.len())));
+    };
+    if cookie != V2_COOKIE {
+        return Err(WireError::Histogram(format!("cookie {cookie:#x}, expected V2's {V2_COOKIE:#x}")));
+    }
+    let available = bytes.len() - V2_HEADER;
+    if usize::try_from(payload).is_ok_and(|p| p > available) {
+        return Err(WireError::Histogram(format!("payload of {payload} bytes claimed, {available} sent")));
+    }
+    if digits > u32::from(HISTOGRAM_DIGITS) || highest > HISTOGRAM_HIGHEST {
+        return Err(WireError::HistogramBounds(format!(
+            "{digits} digits up to {highest}, squall's histograms keep {HISTOGRAM_DIGITS} up to {HISTOGRAM_HIGHEST}"
+        )));
+    }
     let h: Histogram<u64> = hdrhistogram::serialization::Deserializer::new()
         .deserialize(&mut &bytes[..])
         .map_err(|e| WireError::Histogram(format!("{e:?}")))?;
@@ -54,6 +91,7 @@ fn histogram_from(bytes: &[u8]) -> Result<Histogram<u64>, WireError> {
     Ok(bounded)
 }
 
+#[cfg(feature = "cluster")]
 impl TaskOutcome {
     /// The outcome in its portable form.
     pub(crate) fn to_wire(&self) -> OutcomeWire {
@@ -95,7 +133,7 @@ impl TaskOutcome {
         for (k, v) in w.custom {
             let v = match v {
                 CustomWire::Counter(c) => Custom::Counter(c),
-                CustomWire::Values(bytes) => Custom::Values(Box::new(histogram_from(&bytes)?)),
+                CustomWire::Values(bytes) => Custom::Values(Box::new(decode_histogram(&bytes)?)),
             };
             custom.insert(k, v);
         }
@@ -106,7 +144,7 @@ impl TaskOutcome {
                 busy: Duration::from_nanos(w.busy_ns),
                 blocked: Duration::from_nanos(w.blocked_ns),
                 wall: Duration::from_nanos(w.wall_ns),
-                latency: histogram_from(&w.latency)?,
+                latency: decode_histogram(&w.latency)?,
                 restarts: w.restarts,
                 acked: w.acked,
                 failed: w.failed,
@@ -117,11 +155,12 @@ impl TaskOutcome {
             dropped: w.dropped,
             undelivered: w.undelivered,
             queue_depth_max: usize::try_from(w.queue_depth_max).unwrap_or(usize::MAX),
+            lost: false,
         })
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "cluster"))]
 mod tests {
     use super::*;
     use crate::metrics::task_report;
@@ -135,12 +174,30 @@ mod tests {
         stats.count("scans", 4);
         stats.record("evaluations", 120);
         stats.record("evaluations", 40);
-        let outcome = TaskOutcome { stats, dropped: 2, undelivered: 1, queue_depth_max: 9 };
+        let outcome = TaskOutcome { stats, dropped: 2, undelivered: 1, queue_depth_max: 9, lost: false };
         let bytes = postcard::to_stdvec(&outcome.to_wire()).unwrap();
         let back = TaskOutcome::from_wire(postcard::from_bytes(&bytes).unwrap()).unwrap();
         assert_eq!(task_report(0, &back).execute, task_report(0, &outcome).execute);
         assert_eq!(task_report(0, &back).custom, task_report(0, &outcome).custom);
         assert_eq!((back.dropped, back.undelivered, back.queue_depth_max), (2, 1, 9));
         assert_eq!(back.stats.busy, Duration::from_millis(5));
+    }
+
+    #[test]
+    fn a_histogram_claiming_more_than_it_sends_is_refused_unread() {
+        let mut latency = new_histogram();
+        latency.record(1500).unwrap();
+        let bytes = histogram_bytes(&latency);
+        assert_eq!(decode_histogram(&bytes).unwrap().len(), 1);
+        // The payload length raised to 1.3 GB: the fuzzer's case.
+        let mut claims = bytes.clone();
+        claims[4..8].copy_from_slice(&0x4e00_0000u32.to_be_bytes());
+        let error = decode_histogram(&claims).unwrap_err().to_string();
+        assert!(error.contains("payload of 1308622848 bytes claimed"), "{error}");
+        // Bounds past squall's: 5 digits.
+        let mut digits = bytes.clone();
+        digits[12..16].copy_from_slice(&5u32.to_be_bytes());
+        assert!(matches!(decode_histogram(&digits), Err(WireError::HistogramBounds(_))));
+        assert!(decode_histogram(&bytes[..39]).is_err());
     }
 }

@@ -1,7 +1,9 @@
 //! Commands from the coordinator to a task, and what tasks report back.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 use tokio::sync::Notify;
 
@@ -86,11 +88,44 @@ pub(crate) struct Control {
     pub(crate) ticking: AtomicBool,
     /// Wakes the task.
     pub(crate) signal: Arc<TaskSignal>,
+    /// When the bolt's current `execute` or `tick` began, or last stopped
+    /// waiting for queue space, in ns after [`epoch`] plus one; 0 outside
+    /// a call. What the stall watchdog reads.
+    busy_since: AtomicU64,
+}
+
+/// The instant `busy_since` counts from (the first use in the process).
+fn epoch() -> Instant {
+    static EPOCH: OnceLock<Instant> = OnceLock::new();
+    *EPOCH.get_or_init(Instant::now)
 }
 
 impl Control {
     pub(crate) fn new(signal: Arc<TaskSignal>) -> Self {
-        Control { stage: AtomicU8::new(Stage::Run as u8), ticking: AtomicBool::new(false), signal }
+        Control {
+            stage: AtomicU8::new(Stage::Run as u8),
+            ticking: AtomicBool::new(false),
+            signal,
+            busy_since: AtomicU64::new(0),
+        }
+    }
+
+    /// The bolt entered a call (or stopped waiting inside one) at `at`.
+    pub(crate) fn call_progressed(&self, at: Instant) {
+        let since = at.saturating_duration_since(epoch()).as_nanos() as u64 + 1;
+        self.busy_since.store(since, Ordering::Relaxed);
+    }
+
+    /// The bolt left its call.
+    pub(crate) fn call_ended(&self) {
+        self.busy_since.store(0, Ordering::Relaxed);
+    }
+
+    /// How long the bolt has been in its current call without progress
+    /// (time waiting for queue space excluded), if it is in one.
+    pub(crate) fn stuck_for(&self, now: Instant) -> Option<Duration> {
+        let since = self.busy_since.load(Ordering::Relaxed).checked_sub(1)?;
+        Some(now.saturating_duration_since(epoch() + Duration::from_nanos(since)))
     }
 
     pub(crate) fn stage(&self) -> Stage {
@@ -119,6 +154,15 @@ pub(crate) enum EventKind {
     /// (reported against one of them).
     #[cfg_attr(not(feature = "cluster"), allow(dead_code))]
     HostLost(u16),
+}
+
+/// Why a run was abandoned.
+#[derive(Debug)]
+pub(crate) enum Failure {
+    /// A task failed (or stalled, or its host was lost).
+    Task(TaskFailure),
+    /// The process's resident memory (bytes) passed the limit (bytes).
+    Memory { rss: u64, limit: u64 },
 }
 
 /// The task that failed a run, and why; the run's error names it.

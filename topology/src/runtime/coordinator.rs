@@ -10,7 +10,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use crate::plan::Topology;
-use crate::runtime::control::{Event, EventKind, Stage, TaskFailure};
+use crate::runtime::control::{Event, EventKind, Failure, Stage, TaskFailure};
+use crate::runtime::memory;
 use crate::runtime::wiring::Wiring;
 use crate::spec::Role;
 
@@ -25,6 +26,14 @@ pub(crate) trait Hosts {
     fn totals(&mut self) -> Option<(u64, u64)>;
     /// Stops everything now: marks the run aborting and closes the queues.
     fn abort(&mut self);
+
+    /// The task that has been inside one call without progress the
+    /// longest, if that is `limit` or more: (component, task, how long).
+    /// Hosts that cannot see their tasks' calls say `None`.
+    fn stalled(&mut self, limit: Duration) -> Option<(usize, usize, Duration)> {
+        let _ = limit;
+        None
+    }
 
     /// A process of the run was lost: moves its tasks to the others, or
     /// says why the run cannot go on, naming a task it lost (component,
@@ -49,6 +58,22 @@ impl Hosts for &Wiring {
         Some(self.queue_totals())
     }
 
+    fn stalled(&mut self, limit: Duration) -> Option<(usize, usize, Duration)> {
+        let now = Instant::now();
+        let mut longest = None;
+        for (c, controls) in self.controls.iter().enumerate() {
+            for (t, control) in controls.iter().enumerate() {
+                if let Some(stuck) = control.stuck_for(now)
+                    && stuck >= limit
+                    && longest.is_none_or(|(_, _, l)| stuck > l)
+                {
+                    longest = Some((c, t, stuck));
+                }
+            }
+        }
+        longest
+    }
+
     fn abort(&mut self) {
         self.aborting.store(true, Ordering::SeqCst);
         for c in 0..self.controls.len() {
@@ -60,6 +85,8 @@ impl Hosts for &Wiring {
 
 /// How often the coordinator looks at the run while it waits.
 const POLL: Duration = Duration::from_millis(1);
+/// How often the watchdogs look (stalls, memory).
+const WATCH: Duration = Duration::from_millis(100);
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -77,6 +104,10 @@ pub(crate) struct Coordinator<'a, H: Hosts> {
     exited: usize,
     tasks: usize,
     last_scan: Option<(u64, u64)>,
+    /// When the watchdogs last looked.
+    last_watch: Instant,
+    /// The memory limit, bytes (`None`: not watched).
+    memory_limit: Option<u64>,
 }
 
 impl<'a, H: Hosts> Coordinator<'a, H> {
@@ -94,6 +125,8 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
             exited: 0,
             tasks: comps.iter().map(|c| c.spec.parallelism).sum(),
             last_scan: None,
+            last_watch: Instant::now(),
+            memory_limit: topology.spec.memory_limit.or_else(memory::default_limit),
         }
     }
 
@@ -110,8 +143,40 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
         stable
     }
 
+    /// The watchdogs' verdict, looked at every [`WATCH`]: a bolt stuck in
+    /// one call for the topology's `stall_secs`, or resident memory past
+    /// the limit. Either is logged as it is found.
+    fn watch(&mut self) -> Option<Failure> {
+        if self.last_watch.elapsed() < WATCH {
+            return None;
+        }
+        self.last_watch = Instant::now();
+        let limit = self.topology.spec.stall;
+        if let Some((component, task, stuck)) = self.hosts.stalled(limit) {
+            let message = format!(
+                "stalled: no progress for {:.1} s inside one execute or tick (waits for queue space aside); \
+                 the limit is [topology] stall_secs = {}",
+                stuck.as_secs_f64(),
+                limit.as_secs_f64()
+            );
+            let name = &self.topology.components[component].spec.name;
+            tracing::error!(component = %name, task, "{message}");
+            return Some(Failure::Task(TaskFailure { component, task, message }));
+        }
+        let limit = self.memory_limit?;
+        let rss = memory::resident_bytes()?;
+        (rss > limit).then(|| {
+            tracing::error!(
+                rss_mib = rss >> 20,
+                limit_mib = limit >> 20,
+                "resident memory past the run's limit"
+            );
+            Failure::Memory { rss, limit }
+        })
+    }
+
     /// Runs the shutdown protocol; returns the first failure, if any.
-    pub(crate) fn drive(&mut self, events: &mpsc::Receiver<Event>, grace: Duration) -> Option<TaskFailure> {
+    pub(crate) fn drive(&mut self, events: &mpsc::Receiver<Event>, grace: Duration) -> Option<Failure> {
         let order = &self.topology.order;
         let mut phase = Phase::Running;
         loop {
@@ -122,18 +187,22 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
                     EventKind::Exited => self.exited += 1,
                     EventKind::Failed(message) => {
                         self.abort(events, grace);
-                        return Some(TaskFailure { component, task, message });
+                        return Some(Failure::Task(TaskFailure { component, task, message }));
                     }
                     EventKind::HostLost(host) => {
                         if let Err(failure) = self.hosts.recover(host, phase == Phase::Running) {
                             self.abort(events, grace);
-                            return Some(failure);
+                            return Some(Failure::Task(failure));
                         }
                         self.last_scan = None;
                     }
                 },
                 Err(mpsc::RecvTimeoutError::Timeout) => {}
                 Err(mpsc::RecvTimeoutError::Disconnected) => return None,
+            }
+            if let Some(failure) = self.watch() {
+                self.abort(events, grace);
+                return Some(failure);
             }
             phase = match phase {
                 Phase::Running if self.spouts_running == 0 => {

@@ -14,6 +14,7 @@ use crate::error::EmitError;
 use crate::message::{Message, MessageType, Payload};
 use crate::metrics::TaskStats;
 use crate::runtime::acker::{AckTracker, Anchor, Replay};
+use crate::runtime::control::Control;
 use crate::runtime::target::Target;
 use crate::tuple::{Source, Tuple};
 
@@ -74,6 +75,9 @@ pub struct Emitter {
     pub(crate) aborting: Arc<AtomicBool>,
     /// Set by [`Emitter::hold_inputs`].
     pub(crate) holding: bool,
+    /// A bolt task's control, told when an emit stops waiting for queue
+    /// space (the stall watchdog does not count that wait).
+    pub(crate) watch: Option<Arc<Control>>,
     task: usize,
 }
 
@@ -94,6 +98,7 @@ impl Emitter {
             stats: TaskStats::default(),
             aborting,
             holding: false,
+            watch: None,
             task,
         }
     }
@@ -149,7 +154,11 @@ impl Emitter {
         let payload: Payload = Arc::new(value);
         let anchor = self.anchor.as_ref().map(|a| Box::new(a.child()));
         self.stats.emitted += 1;
-        queue.deliver(Tuple { source, payload, anchor }, &self.aborting, &mut self.stats.blocked).await
+        let blocked = self.stats.blocked;
+        let delivered =
+            queue.deliver(Tuple { source, payload, anchor }, &self.aborting, &mut self.stats.blocked).await;
+        waited(self.watch.as_deref(), blocked, self.stats.blocked);
+        delivered
     }
 
     /// Marks the tuple being executed as failed: its spout (if it acks)
@@ -272,7 +281,10 @@ impl Emitter {
                 };
                 let tuple =
                     Tuple { source: stream.source, payload, anchor: parent.map(|a| Box::new(a.child())) };
-                sub.targets[i].deliver(tuple, &self.aborting, &mut self.stats.blocked).await?;
+                let blocked = self.stats.blocked;
+                let delivered = sub.targets[i].deliver(tuple, &self.aborting, &mut self.stats.blocked).await;
+                waited(self.watch.as_deref(), blocked, self.stats.blocked);
+                delivered?;
             }
         }
         Ok(())
@@ -281,5 +293,15 @@ impl Emitter {
     /// Replays a failed root.
     pub(crate) async fn replay(&mut self, r: Replay) -> Result<(), EmitError> {
         self.emit_payload(r.stream, r.payload, None, Some((r.seq, r.attempt + 1))).await
+    }
+}
+
+/// After a delivery: if it waited for queue space (the blocked time grew
+/// from `before` to `after`), the call it was made in progressed now.
+fn waited(watch: Option<&Control>, before: Duration, after: Duration) {
+    if after != before
+        && let Some(watch) = watch
+    {
+        watch.call_progressed(Instant::now());
     }
 }

@@ -13,6 +13,11 @@
 //! ignored): `finish`/`close`, quiescence again, exit. Nothing in flight is
 //! lost; a tuple sent over a feedback edge to a component that has already
 //! exited is counted as undelivered and reported.
+//!
+//! Watchdogs: the coordinator fails the run, naming the cause, when a bolt
+//! stays inside one `execute` or `tick` without progress for the
+//! topology's `stall_secs`, or when the process's resident memory passes
+//! its `memory_limit_mb`.
 
 pub(crate) mod acker;
 pub(crate) mod control;
@@ -20,6 +25,7 @@ pub(crate) mod coordinator;
 pub mod emitter;
 pub(crate) mod erased;
 pub mod in_process;
+mod memory;
 mod options;
 pub(crate) mod outcome;
 pub(crate) mod queue;

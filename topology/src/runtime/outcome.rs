@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use crate::metrics::{RunReport, TaskOutcome, component_report};
 use crate::plan::Topology;
-use crate::runtime::control::TaskFailure;
+use crate::runtime::control::{Failure, TaskFailure};
 use crate::spec::Role;
 
 /// A run that failed: which task and why, with the metrics up to then.
@@ -25,20 +25,50 @@ pub enum RunError {
         /// Metrics up to the failure.
         report: Box<RunReport>,
     },
+    /// The process's resident memory passed the topology's limit
+    /// (`[topology] memory_limit_mb`, by default 90% of the machine's).
+    #[error(
+        "the process's resident memory reached {rss_mb} MiB, past the limit of {limit_mb} MiB \
+         ([topology] memory_limit_mb): a component keeps what it should let go, or the limit is too low"
+    )]
+    MemoryLimit {
+        /// Resident memory when the watchdog looked, MiB.
+        rss_mb: u64,
+        /// The limit, MiB.
+        limit_mb: u64,
+        /// Metrics up to the failure.
+        report: Box<RunReport>,
+    },
     /// The runtime itself could not start.
     #[error("cannot start the runtime: {0}")]
     Start(#[from] std::io::Error),
+}
+
+impl RunError {
+    /// What went wrong, and the metrics up to then if the run started.
+    pub fn into_parts(self) -> (String, Option<RunReport>) {
+        let message = self.to_string();
+        match self {
+            RunError::TaskFailed { report, .. } | RunError::MemoryLimit { report, .. } => {
+                (message, Some(*report))
+            }
+            RunError::Start(_) => (message, None),
+        }
+    }
 }
 
 /// The report as the run's result: an error naming the failed task, if any.
 pub(crate) fn finish_run(
     topology: &Topology,
     report: RunReport,
-    failure: Option<TaskFailure>,
+    failure: Option<Failure>,
 ) -> Result<RunReport, RunError> {
     match failure {
         None => Ok(report),
-        Some(TaskFailure { component, task, message }) => {
+        Some(Failure::Memory { rss, limit }) => {
+            Err(RunError::MemoryLimit { rss_mb: rss >> 20, limit_mb: limit >> 20, report: Box::new(report) })
+        }
+        Some(Failure::Task(TaskFailure { component, task, message })) => {
             let spec = &topology.components[component].spec;
             Err(RunError::TaskFailed {
                 role: spec.role,

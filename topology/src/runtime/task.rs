@@ -79,11 +79,12 @@ pub(crate) struct BoltTask {
 
 impl BoltTask {
     pub(crate) fn new(
-        common: TaskCommon,
+        mut common: TaskCommon,
         inbox: Vec<Arc<EdgeQueue>>,
         holdable: Vec<bool>,
         tick: Option<Duration>,
     ) -> Self {
+        common.emitter.watch = Some(common.control.clone());
         BoltTask {
             common,
             inbox,
@@ -189,7 +190,9 @@ impl BoltTask {
         // Counted before it runs: a tuple whose execution panics or fails
         // was received all the same.
         out.stats.received += 1;
+        self.common.control.call_progressed(clock);
         let result = bolt.execute(tuple, out).await;
+        self.common.control.call_ended();
         let now = Instant::now();
         let elapsed = now - clock;
         let stats = &mut out.stats;
@@ -220,7 +223,9 @@ async fn tick<B: Bolt>(
     let result = if busy || control.stage() < Stage::Drain {
         let blocked_before = t.common.emitter.stats.blocked;
         let start = Instant::now();
+        control.call_progressed(start);
         let result = bolt.tick(&mut t.common.emitter).await;
+        control.call_ended();
         let stats = &mut t.common.emitter.stats;
         stats.busy += start.elapsed().saturating_sub(stats.blocked - blocked_before);
         result
@@ -541,6 +546,7 @@ fn finish_thread(
         dropped: sum(|q| q.counters.dropped.load(Ordering::Relaxed)),
         undelivered: sum(|q| q.counters.undelivered.load(Ordering::Relaxed)),
         queue_depth_max: inbox.iter().map(|q| q.max_depth()).max().unwrap_or(0),
+        lost: false,
     };
     common.report(EventKind::Exited);
     outcome

@@ -118,6 +118,8 @@ pub(crate) fn join_tasks(threads: TaskThreads, clean: bool) -> Vec<Vec<Option<Ta
         .collect()
 }
 
+/// The outcome of a task whose thread never returned (or whose host was
+/// lost): nothing known, and marked so.
 pub(crate) fn lost_outcome() -> TaskOutcome {
-    TaskOutcome { stats: Default::default(), dropped: 0, undelivered: 0, queue_depth_max: 0 }
+    TaskOutcome { stats: Default::default(), dropped: 0, undelivered: 0, queue_depth_max: 0, lost: true }
 }

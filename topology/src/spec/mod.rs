@@ -46,6 +46,14 @@ pub const MAX_PENDING: usize = 1 << 20;
 /// The longest tick period or ack timeout, seconds (a week): longer ones
 /// cannot be timed on every platform's clock.
 pub const MAX_PERIOD_SECS: f64 = 7.0 * 24.0 * 3600.0;
+/// How long a bolt may stay inside one call without progress before the
+/// run fails: 5 minutes, a thousand times a slow scan match.
+pub const DEFAULT_STALL: Duration = Duration::from_secs(300);
+/// The largest topology file read: 1 MiB, hundreds of times the largest
+/// real one. Parsing holds several times a file's size in memory (a 20 MB
+/// params array took 1.5 GB to refuse); data belongs in files that
+/// components read.
+pub const MAX_FILE_BYTES: usize = 1 << 20;
 
 /// A number as a person reads it in a message: huge or tiny ones in
 /// exponent form (`1e300`), not their three hundred digits.
@@ -65,6 +73,14 @@ pub struct TopologySpec {
     pub name: String,
     /// `[topology] seed` (default 0).
     pub seed: u64,
+    /// `[topology] stall_secs`: a bolt inside one `execute` or `tick`
+    /// this long without progress (waits for queue space aside) fails the
+    /// run, naming it (default [`DEFAULT_STALL`]).
+    pub stall: Duration,
+    /// `[topology] memory_limit_mb`, in bytes: the process's resident
+    /// memory above it fails the run, naming the limit. `None`: 90% of
+    /// what the machine (or its cgroup) allows.
+    pub memory_limit: Option<u64>,
     /// Spouts then bolts, in file order.
     pub components: Vec<ComponentSpec>,
     pub(crate) source: SourceText,
@@ -145,13 +161,7 @@ impl InputSpec {
 impl TopologySpec {
     /// Reads and parses a topology file, applying `overrides` first.
     pub fn load(path: &Path, overrides: &[Override]) -> Result<Self, SpecErrors> {
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| SpecError {
-            file: file.as_str().into(),
-            line: 0,
-            component: None,
-            message: format!("cannot read the topology file: {e}"),
-        })?;
+        let (file, text) = read_file(path)?;
         Self::parse_with(&file, &text, overrides)
     }
 
@@ -162,6 +172,31 @@ impl TopologySpec {
 
     /// Parses topology text after applying `overrides`.
     pub fn parse_with(file: &str, text: &str, overrides: &[Override]) -> Result<Self, SpecErrors> {
+        let (spec, errors) = Self::parse_partial(file, text, overrides)?;
+        if errors.is_empty() { Ok(spec) } else { Err(SpecErrors(errors)) }
+    }
+
+    /// Parses topology text after applying `overrides`, as far as it
+    /// goes: the spec with every component that parsed, and the problems
+    /// found (so that validation can add its own and report them all at
+    /// once). An error only when there is no spec at all: the text is not
+    /// TOML, or an override does not apply.
+    pub(crate) fn parse_partial(
+        file: &str,
+        text: &str,
+        overrides: &[Override],
+    ) -> Result<(Self, Vec<SpecError>), SpecErrors> {
+        if text.len() > MAX_FILE_BYTES {
+            return Err(SpecErrors(vec![SpecError {
+                file: file.into(),
+                line: 0,
+                component: None,
+                message: format!(
+                    "{} bytes; a topology file is at most {MAX_FILE_BYTES} (large data belongs in a file a component reads)",
+                    text.len()
+                ),
+            }]));
+        }
         let source = SourceText::new(file, text);
         let edited;
         let text = if overrides.is_empty() {
@@ -179,7 +214,7 @@ impl TopologySpec {
             let line = e.span().map_or(0, |s| source.line(s.start));
             source.error_at_line(line, None, e.message().trim().to_string())
         })?;
-        convert(raw, source, text.into())
+        Ok(convert(raw, source, text.into()))
     }
 
     /// The component called `name`.
@@ -199,7 +234,29 @@ impl TopologySpec {
     }
 }
 
-fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> Result<TopologySpec, SpecErrors> {
+/// A topology file's name (as errors give it) and text; an error if it
+/// cannot be read or is larger than [`MAX_FILE_BYTES`] (checked before
+/// reading it).
+pub(crate) fn read_file(path: &Path) -> Result<(String, String), SpecErrors> {
+    let file = path.display().to_string();
+    let error = |message: String| {
+        SpecErrors(vec![SpecError { file: file.as_str().into(), line: 0, component: None, message }])
+    };
+    let size =
+        std::fs::metadata(path).map_err(|e| error(format!("cannot read the topology file: {e}")))?.len();
+    if size > MAX_FILE_BYTES as u64 {
+        return Err(error(format!(
+            "{size} bytes; a topology file is at most {MAX_FILE_BYTES} (large data belongs in a file a component reads)"
+        )));
+    }
+    let text =
+        std::fs::read_to_string(path).map_err(|e| error(format!("cannot read the topology file: {e}")))?;
+    Ok((file, text))
+}
+
+/// The spec of `raw`, with every component that converts, and the
+/// problems found.
+fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> (TopologySpec, Vec<SpecError>) {
     let mut errors = Vec::new();
     let topology = raw.topology.into_inner();
     let seed = match topology.seed {
@@ -211,6 +268,30 @@ fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> Resul
         }
     };
     let name = topology.name.into_inner();
+    let stall = match &topology.stall_secs {
+        None => DEFAULT_STALL,
+        Some(t) => period(*t.get_ref()).unwrap_or_else(|| {
+            let got = readable_number(*t.get_ref());
+            errors.push(source.error(
+                t.span().start,
+                None,
+                format!("stall_secs must be in (0, {MAX_PERIOD_SECS}] (a week), got {got}"),
+            ));
+            DEFAULT_STALL
+        }),
+    };
+    let memory_limit = topology.memory_limit_mb.as_ref().and_then(|m| {
+        let mb = *m.get_ref();
+        let bytes = u64::try_from(mb).ok().filter(|&mb| mb > 0).and_then(|mb| mb.checked_mul(1 << 20));
+        if bytes.is_none() {
+            errors.push(source.error(
+                m.span().start,
+                None,
+                format!("memory_limit_mb must be a positive number of MiB, got {mb}"),
+            ));
+        }
+        bytes
+    });
     if raw.spout.is_empty() {
         errors.push(source.error_at_line(1, None, "a topology needs at least one [[spout]]"));
     }
@@ -244,11 +325,7 @@ fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> Resul
             format!("the components' parallelism adds up to {tasks} tasks; at most {MAX_TASKS} run in one topology"),
         ));
     }
-    if errors.is_empty() {
-        Ok(TopologySpec { name, seed, components, source, text })
-    } else {
-        Err(SpecErrors(errors))
-    }
+    (TopologySpec { name, seed, stall, memory_limit, components, source, text }, errors)
 }
 
 /// Whether `name` can name a component: `--set NAME.key=value`, metrics
@@ -585,10 +662,27 @@ inputs = [ { from = "src", grouping = "fields", fields = ["key"], queue = 8, pol
         }
         let good = GOOD.replace("name = \"b\"", "name = \"_scan-matcher2\"");
         assert!(TopologySpec::parse("t.toml", &good).is_ok());
-        // A megabyte-long name is cut in the message, not echoed whole.
-        let long = GOOD.replace("name = \"b\"", &format!("name = \"{}\"", ".".repeat(1 << 20)));
+        // A name near a megabyte long (the most a file holds) is cut in the
+        // message, not echoed whole.
+        let long = GOOD.replace("name = \"b\"", &format!("name = \"{}\"", ".".repeat(MAX_FILE_BYTES - 1000)));
         let err = TopologySpec::parse("t.toml", &long).unwrap_err().to_string();
         assert!(err.len() < 1200 && err.contains("more bytes)"), "{} bytes: {:.200}", err.len(), err);
+    }
+
+    #[test]
+    fn a_file_past_the_size_limit_is_refused_before_it_is_parsed() {
+        // A 2 MB params array: it took 1.5 GB to parse before it could be
+        // refused.
+        let big = format!("{GOOD}\n[x]\nvalues = [{}]\n", "0.5,".repeat(1 << 19));
+        let err = TopologySpec::parse("t.toml", &big).unwrap_err().to_string();
+        assert!(err.starts_with("t.toml:0: ") && err.contains("a topology file is at most 1048576"), "{err}");
+        let dir = std::env::temp_dir().join(format!("squall-spec-size-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("big.toml");
+        std::fs::write(&file, &big).unwrap();
+        let err = TopologySpec::load(&file, &[]).unwrap_err().to_string();
+        assert!(err.contains(&format!("{} bytes; a topology file is at most", big.len())), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

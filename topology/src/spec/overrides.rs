@@ -15,7 +15,7 @@ use toml_edit::{DocumentMut, Item, TableLike, Value};
 const COMPONENT_KEYS: &[&str] =
     &["name", "kind", "parallelism", "params", "inputs", "tick_secs", "restart", "ack", "peer_queue"];
 const INPUT_KEYS: &[&str] = &["from", "stream", "grouping", "fields", "queue", "policy", "feedback"];
-const TOPOLOGY_KEYS: &[&str] = &["name", "seed"];
+const TOPOLOGY_KEYS: &[&str] = &["name", "seed", "stall_secs", "memory_limit_mb"];
 
 /// Why an override could not be read or applied.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -19,6 +19,10 @@ pub(crate) struct RawTopology {
     pub(crate) name: Spanned<String>,
     #[serde(default)]
     pub(crate) seed: Option<Spanned<i64>>,
+    #[serde(default)]
+    pub(crate) stall_secs: Option<Spanned<f64>>,
+    #[serde(default)]
+    pub(crate) memory_limit_mb: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
