@@ -16,22 +16,6 @@ secs=$((minutes * 60))
 squall="${SQUALL:-target/release/squall}"
 mkdir -p "$out"
 
-# The SLAM main job on a longer simulated run: the simulator replays about
-# 180 simulated seconds per wall second here, so its duration is scaled to
-# fill the time asked for.
-slam() {
-  "$squall" slam --set "source.params.duration_secs=$((secs * 180))" --out "$out/slam" 2>"$out/slam.stderr"
-}
-# 10x overload: the source offers 100 000 probes/s, the sink takes about
-# 10 000/s (100 us each); the queue drops the oldest. Every probe must end
-# received or dropped.
-overload() {
-  "$squall" run examples/topologies/probe.toml \
-    --set "source.params.count=$((secs * 100000))" --set source.params.rate_hz=100000 \
-    --set sink.params.delay_us=100 --set relay.inputs.0.policy='"drop_oldest"' \
-    --set sink.inputs.0.policy='"drop_oldest"' --quiet --out "$out/overload" 2>"$out/overload.stderr"
-}
-
 # Samples PID every 10 s into CSV until it exits: seconds, rss_kib, fds.
 sample() {
   local pid="$1" csv="$2" start
@@ -45,8 +29,21 @@ sample() {
   done
 }
 
-slam & slam_pid=$!
-overload & overload_pid=$!
+# The SLAM main job on a longer simulated run: with the other job beside
+# it, the simulator replays about 90 simulated seconds per wall second
+# here, so its duration is scaled to fill the time asked for.
+"$squall" slam --set "source.params.duration_secs=$((secs * 90))" --out "$out/slam" \
+  >"$out/slam.stdout" 2>"$out/slam.stderr" &
+slam_pid=$!
+# Overload: the source offers 100 000 probes/s; the sink, 100 us asleep
+# per probe, takes well under a tenth of that; both queues drop the
+# oldest. Every probe must end received or dropped.
+"$squall" run examples/topologies/probe.toml \
+  --set "source.params.count=$((secs * 100000))" --set source.params.rate_hz=100000 \
+  --set sink.params.delay_us=100 --set relay.inputs.0.policy='"drop_oldest"' \
+  --set sink.inputs.0.policy='"drop_oldest"' --quiet --out "$out/overload" \
+  >"$out/overload.stdout" 2>"$out/overload.stderr" &
+overload_pid=$!
 sample "$slam_pid" "$out/slam.csv" &
 sample "$overload_pid" "$out/overload.csv" &
 set +e

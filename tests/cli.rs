@@ -205,6 +205,29 @@ fn a_bolt_that_hangs_is_named_by_the_stall_watchdog() {
 }
 
 #[test]
+fn a_restarted_bolt_waiting_for_input_is_not_a_stall() {
+    // The relay panics on its 2nd tuple and is restarted; the source sends
+    // one tuple every 2 s, so the new incarnation waits longer than the
+    // watchdog's 1 s for the 3rd: idle, not stuck in a call. (No
+    // backtrace: printing one takes long enough to look like a stall.)
+    let dir = out_dir("restart-idle");
+    let out = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["run", "examples/topologies/probe.toml", "--out", dir.to_str().unwrap()])
+        .args(["--set", "source.params={ count = 3, rate_hz = 0.5 }", "--set", "relay.params.panic_at=2"])
+        .args(["--set", "relay.restart={ max_restarts = 1 }", "--set", "topology.stall_secs=1"])
+        .env("RUST_BACKTRACE", "0")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["status"], "completed");
+    assert_eq!(metrics["components"][1]["restarts"], 1, "{metrics}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn a_bolt_that_keeps_allocating_hits_the_memory_limit() {
     // 1 MiB kept per tuple against a 200 MiB limit.
     let (stderr, metrics) =
@@ -257,6 +280,45 @@ fn a_full_disk_fails_the_run_naming_the_file_and_leaves_no_partial_output() {
         .collect();
     left.sort();
     assert!(left.iter().all(|f| !f.contains(".tmp") && f != "map.pgm"), "half-written files: {left:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn paths_that_are_not_utf_8_are_used_as_given_or_refused_by_name() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = out_dir("non-utf8");
+    let odd = dir.join(std::ffi::OsStr::from_bytes(b"caf\xe9"));
+    std::fs::create_dir_all(&odd).unwrap();
+    // --out is used as the bytes given.
+    let out = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args([
+            "run",
+            "examples/topologies/probe.toml",
+            "--set",
+            "source.params.count=100",
+            "--quiet",
+            "--out",
+        ])
+        .arg(odd.join("run"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(odd.join("run/metrics.json").is_file());
+    // A log reaches its spout through the topology (UTF-8 text): refused
+    // by name before the run, not mangled into a file that cannot be read.
+    let log = odd.join("aces.clf");
+    std::fs::copy(shared_data("laser/aces.clf"), &log).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["slam", "--max-scans", "5", "--log"])
+        .arg(&log)
+        .arg("--out")
+        .arg(odd.join("slam"))
+        .output()
+        .unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("aces.clf: the path is not valid UTF-8"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -12,7 +12,7 @@ use squall_spouts::sim::{Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, 
 use squall_topology::{Override, Topology};
 
 use super::eval::print_map_frame;
-use super::{EXIT_INVALID, report_invalid, run};
+use super::{EXIT_INVALID, report_invalid, run, topology_path};
 
 const LOCALIZE_TOML: &str = include_str!("../../examples/topologies/localize.toml");
 
@@ -104,7 +104,7 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
             return Err(format!("--resampling must be low-variance, sparse-ring or global, got {other}"));
         }
     };
-    let map = args.map.to_string_lossy().to_string();
+    let map = topology_path("--map", &args.map)?.to_string();
     let start = match args.start.as_str() {
         "drawn" => Start::Drawn,
         "first-node" => Start::FirstNode,

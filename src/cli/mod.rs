@@ -249,6 +249,20 @@ fn parse_args() -> Result<Cli, clap::Error> {
     Cli::from_arg_matches(&matches)
 }
 
+/// A path the command passes to a component through the topology, whose
+/// values are UTF-8 text: the path as text, or an error naming `flag` if
+/// it is not valid UTF-8 (rather than a mangled name that then cannot be
+/// read).
+fn topology_path<'a>(flag: &str, path: &'a std::path::Path) -> Result<&'a str, String> {
+    path.to_str().ok_or_else(|| {
+        format!(
+            "{flag} {}: the path is not valid UTF-8, and components take paths from the topology, \
+             which is UTF-8 text: rename it, or link it under a UTF-8 name",
+            path.display()
+        )
+    })
+}
+
 /// Checks before a run that `--out DIR` can be written (created if
 /// missing); the error is printed and is exit code 2.
 fn writable_out(dir: &std::path::Path) -> Result<(), ExitCode> {

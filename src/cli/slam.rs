@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use squall_topology::{Override, Topology};
 
-use super::{EXIT_INVALID, report_invalid, run};
+use super::{EXIT_INVALID, report_invalid, run, topology_path};
 
 const SLAM_TOML: &str = include_str!("../../examples/topologies/slam.toml");
 
@@ -64,11 +64,11 @@ fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
             }
         }
         Some(path) => {
-            let name = path.to_string_lossy();
+            let name = topology_path("--log", path)?;
             let is_carmen = name.ends_with(".clf") || name.ends_with(".clf.gz") || name.ends_with(".gz");
             let (kind, key) = if is_carmen { ("carmen", "log") } else { ("rosbag2", "bag") };
             sets.push(format!("source.kind={kind}"));
-            sets.push(format!("source.params={{ {key} = {}{max_scans} }}", quoted(&name)));
+            sets.push(format!("source.params={{ {key} = {}{max_scans} }}", quoted(name)));
         }
     }
     if let Some(p) = args.particles {

@@ -35,6 +35,24 @@ pub struct Node {
     pub parent: Option<Arc<Node>>,
 }
 
+impl Drop for Node {
+    /// Unlinks the lineage iteratively. Dropped the default way, a chain
+    /// as long as the run (one node per correcting reading) is freed one
+    /// stack frame per node: a simulated run of 1.6 million readings
+    /// overflowed the resampler thread's stack at its end (found by the
+    /// soak bench).
+    fn drop(&mut self) {
+        let mut next = self.parent.take();
+        while let Some(node) = next {
+            match Arc::try_unwrap(node) {
+                Ok(mut node) => next = node.parent.take(),
+                // Another lineage still holds it (and what it leads to).
+                Err(_) => break,
+            }
+        }
+    }
+}
+
 /// What the resampler decided for one correcting reading.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Decision {
@@ -259,6 +277,44 @@ mod tests {
 
     fn at(x: Real) -> Pose2 {
         Pose2::new(x, 0.0, 0.0)
+    }
+
+    #[test]
+    fn a_lineage_as_long_as_a_days_run_is_dropped_without_recursion() {
+        // Three million readings (more than three days at 10 Hz) on a
+        // thread with a 256 KiB stack: dropped recursively this overflows.
+        let dropped = std::thread::Builder::new()
+            .stack_size(256 << 10)
+            .spawn(|| {
+                let mut node = Arc::new(Node {
+                    stamp: 0.0,
+                    pose: Pose2::IDENTITY,
+                    odometry: Pose2::IDENTITY,
+                    parent: None,
+                });
+                for i in 1..3_000_000 {
+                    let parent = Some(node);
+                    node = Arc::new(Node {
+                        stamp: i as f64,
+                        pose: Pose2::IDENTITY,
+                        odometry: Pose2::IDENTITY,
+                        parent,
+                    });
+                }
+                // A second lineage sharing the tail keeps it alive.
+                let sibling = Node {
+                    stamp: 0.5,
+                    pose: Pose2::IDENTITY,
+                    odometry: Pose2::IDENTITY,
+                    parent: Some(node.clone()),
+                };
+                drop(node);
+                assert_eq!(sibling.parent.as_ref().map(|p| p.stamp), Some(2_999_999.0));
+                drop(sibling);
+            })
+            .unwrap()
+            .join();
+        assert!(dropped.is_ok());
     }
 
     #[test]

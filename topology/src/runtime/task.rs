@@ -496,9 +496,15 @@ pub(crate) fn bolt_thread(
     max_restarts: u32,
 ) -> TaskOutcome {
     let started = Instant::now();
-    let failure = supervise(&mut task, max_restarts, |task| match factory(&params) {
-        Ok(mut bolt) => Incarnation::of(|| bolt.run(task, &runtime)),
-        Err(e) => Incarnation::Failed(format!("could not be created: {e}").into()),
+    let failure = supervise(&mut task, max_restarts, |task| {
+        // A call that panicked never said it ended: the new incarnation
+        // starts outside any call, or the stall watchdog would count the
+        // idle time after a restart.
+        task.common.control.call_ended();
+        match factory(&params) {
+            Ok(mut bolt) => Incarnation::of(|| bolt.run(task, &runtime)),
+            Err(e) => Incarnation::Failed(format!("could not be created: {e}").into()),
+        }
     });
     // Whatever is still queued, or taken in a batch and not yet executed,
     // can no longer be executed: counted as undelivered on its queue.
