@@ -116,6 +116,16 @@ impl Control {
         self.busy_since.store(since, Ordering::Relaxed);
     }
 
+    /// An emit stopped waiting for queue space at `at`: if the bolt is in
+    /// a call, the call progressed. Outside one (an emit from `finish`,
+    /// which is not watched) nothing changes: the watchdog must not start
+    /// counting a call that will never be said to end.
+    pub(crate) fn wait_ended(&self, at: Instant) {
+        if self.busy_since.load(Ordering::Relaxed) != 0 {
+            self.call_progressed(at);
+        }
+    }
+
     /// The bolt left its call.
     pub(crate) fn call_ended(&self) {
         self.busy_since.store(0, Ordering::Relaxed);
@@ -179,4 +189,28 @@ pub(crate) struct Event {
     pub(crate) component: usize,
     pub(crate) task: usize,
     pub(crate) kind: EventKind,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_call_is_watched_and_a_wait_restarts_its_clock() {
+        let control = Control::new(Arc::new(TaskSignal::default()));
+        let later = Instant::now() + Duration::from_secs(5);
+        // An emit from `finish` that waited: still outside any call.
+        control.wait_ended(Instant::now());
+        assert_eq!(control.stuck_for(later), None);
+        let start = Instant::now();
+        control.call_progressed(start);
+        let stuck = control.stuck_for(later).unwrap();
+        assert!(stuck >= Duration::from_secs(5) - Duration::from_millis(1), "{stuck:?}");
+        // A wait for queue space that ends 4 s into the call restarts the clock.
+        control.wait_ended(start + Duration::from_secs(4));
+        let stuck = control.stuck_for(later).unwrap();
+        assert!(stuck <= Duration::from_secs(1) + Duration::from_millis(1), "{stuck:?}");
+        control.call_ended();
+        assert_eq!(control.stuck_for(later), None);
+    }
 }

@@ -297,11 +297,12 @@ impl Emitter {
 }
 
 /// After a delivery: if it waited for queue space (the blocked time grew
-/// from `before` to `after`), the call it was made in progressed now.
+/// from `before` to `after`), the call it was made in (if any) progressed
+/// now.
 fn waited(watch: Option<&Control>, before: Duration, after: Duration) {
     if after != before
         && let Some(watch) = watch
     {
-        watch.call_progressed(Instant::now());
+        watch.wait_ended(Instant::now());
     }
 }
