@@ -20,6 +20,19 @@ fn squall(args: &[&str]) -> Output {
         .expect("the squall binary runs")
 }
 
+/// Starts `squall ARGS` logging its progress into the file `stderr`, for
+/// a test that signals it while it runs.
+fn spawn_logging_progress(args: &[&str], stderr: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(args)
+        .env("SQUALL_LOG", LOG_PROGRESS)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(stderr).unwrap())
+        .spawn()
+        .unwrap()
+}
+
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
@@ -421,15 +434,20 @@ fn ctrl_c_stops_the_spouts_and_drains_everything_in_flight() {
     let log = std::env::temp_dir().join(format!("squall-cli-{}-ctrl-c.stderr", std::process::id()));
     // A billion probes through a relay that takes 200 µs each: the source
     // is held back by full queues (1024 per edge) whenever Ctrl-C comes.
-    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .args(["run", "examples/topologies/probe.toml", "--set", "source.params.count=1000000000"])
-        .args(["--set", "relay.params.delay_us=200", "--out", dir.to_str().unwrap()])
-        .env("SQUALL_LOG", LOG_PROGRESS)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::fs::File::create(&log).unwrap())
-        .spawn()
-        .unwrap();
+    let out_dir = dir.to_str().unwrap();
+    let child = spawn_logging_progress(
+        &[
+            "run",
+            "examples/topologies/probe.toml",
+            "--set",
+            "source.params.count=1000000000",
+            "--set",
+            "relay.params.delay_us=200",
+            "--out",
+            out_dir,
+        ],
+        &log,
+    );
     let stderr = || std::fs::read_to_string(&log).unwrap_or_default();
     // Interrupt once the handler is in place and both queues have filled.
     let limit = Duration::from_secs(60);
@@ -467,20 +485,19 @@ fn sigterm_stops_a_replay_sleeping_until_its_next_record_and_the_run_finishes() 
     let log = dir.join("gap.clf");
     std::fs::write(&log, "ODOM 0 0 0 0 0 0 1.0 h 1.0\nODOM 1 0 0 0 0 0 10000001.0 h 10000001.0\n").unwrap();
     let stderr_file = dir.join("stderr");
-    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .args([
+    let child = spawn_logging_progress(
+        &[
             "run",
             "examples/topologies/replay.toml",
             "--set",
             &format!("source.params.log={}", log.display()),
-        ])
-        .args(["--set", "source.params.rate=1", "--out", dir.join("out").to_str().unwrap()])
-        .env("SQUALL_LOG", LOG_PROGRESS)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::fs::File::create(&stderr_file).unwrap())
-        .spawn()
-        .unwrap();
+            "--set",
+            "source.params.rate=1",
+            "--out",
+            dir.join("out").to_str().unwrap(),
+        ],
+        &stderr_file,
+    );
     let stderr = || std::fs::read_to_string(&stderr_file).unwrap_or_default();
     let limit = Duration::from_secs(60);
     wait_for("the SIGTERM handler", limit, || catches(child.id(), 15), stderr);

@@ -168,14 +168,15 @@ pub(crate) fn main() -> ExitCode {
             }
         },
         Command::Validate { topology } => match load(&topology) {
-            Ok(t) if !t.unreadable_inputs().is_empty() => {
-                for error in t.unreadable_inputs() {
-                    eprintln!("{error}");
-                }
-                eprintln!("error: the topology is valid, but it reads files that cannot be read here");
-                ExitCode::from(EXIT_INVALID)
-            }
             Ok(t) => {
+                let unreadable = t.unreadable_inputs();
+                if !unreadable.is_empty() {
+                    for error in unreadable {
+                        eprintln!("{error}");
+                    }
+                    eprintln!("error: the topology is valid, but it reads files that cannot be read here");
+                    return ExitCode::from(EXIT_INVALID);
+                }
                 let tasks: usize = t.spec().components.iter().map(|c| c.parallelism).sum();
                 outln!(
                     "{}: topology \"{}\" is valid ({} components, {tasks} tasks)",

@@ -112,11 +112,6 @@ impl Declarer {
         self
     }
 
-    /// The files and folders declared read.
-    pub fn read_paths(&self) -> &[PathBuf] {
-        &self.reads
-    }
-
     /// Asks for a tick every `period`. A topology file's `tick_secs`
     /// overrides it.
     pub fn tick(&mut self, period: Duration) -> &mut Self {

@@ -380,10 +380,7 @@ pub(crate) fn component_report(
 /// This process's peak resident memory, MiB, from `/proc/self/status`
 /// (`None` where there is no such file or line).
 pub fn peak_rss_mb() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
-    let kib: f64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
-    Some(kib / 1024.0)
+    crate::runtime::memory::status_kib("VmHWM:").map(|kib| kib as f64 / 1024.0)
 }
 
 impl RunReport {

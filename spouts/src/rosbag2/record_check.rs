@@ -2,8 +2,9 @@
 //! the `mcap` crate parses the record.
 //!
 //! The crate (0.26) allocates what a string's length prefix claims before
-//! it reads the string: a 50-byte record can make it allocate and zero
-//! 4 GB (found by `fuzz/`'s `mcap_bag` target). Every prefix is checked
+//! it reads the string: a record of a few dozen bytes can claim up to
+//! 4 GiB, allocated and zeroed (found by `fuzz/`'s `mcap_bag` target: an
+//! 18 KB bag that claimed 1.8 GB). Every prefix is checked
 //! here against the bytes the record actually holds, from the field
 //! layouts of the MCAP specification (<https://mcap.dev/spec>).
 
@@ -119,8 +120,8 @@ mod tests {
 
     #[test]
     fn a_prefix_past_the_record_is_refused() {
-        // An attachment index whose name claims 4 GB: what made the mcap
-        // crate allocate 1.8 GB for a 50-byte record.
+        // An attachment index whose name claims 4 GiB: the kind of record
+        // the fuzzer found the mcap crate allocating for.
         let mut index = vec![0; 40];
         index.extend_from_slice(&u32::MAX.to_le_bytes());
         index.extend_from_slice(b"name");

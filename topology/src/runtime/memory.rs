@@ -6,8 +6,13 @@
 /// The process's resident memory, bytes (`VmRSS` in `/proc/self/status`);
 /// `None` where that cannot be read.
 pub(crate) fn resident_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    kib_field(&status, "VmRSS:").map(|kib| kib << 10)
+    status_kib("VmRSS:").map(|kib| kib << 10)
+}
+
+/// The value in kB of the line `key` of `/proc/self/status` (`VmRSS:`,
+/// `VmHWM:`); `None` where that cannot be read.
+pub(crate) fn status_kib(key: &str) -> Option<u64> {
+    kib_field(&std::fs::read_to_string("/proc/self/status").ok()?, key)
 }
 
 /// The limit a run gets unless its topology sets one: 90% of what the

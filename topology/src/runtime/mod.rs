@@ -25,7 +25,7 @@ pub(crate) mod coordinator;
 pub mod emitter;
 pub(crate) mod erased;
 pub mod in_process;
-mod memory;
+pub(crate) mod memory;
 mod options;
 pub(crate) mod outcome;
 pub(crate) mod queue;
