@@ -94,6 +94,7 @@ impl Bolt for Backend {
         out.count("searches", report.searches as u64);
         out.count("loops", report.loops as u64);
         out.count("optimizations", report.optimizations as u64);
+        out.count("full_optimizations", report.full_optimizations as u64);
         out.record("largest_move_mm", (report.largest_move * 1000.0) as u64);
         // With a loop closed, the matcher's last map no longer fits the
         // poses: the map rebuilt along them follows it as the final one.

@@ -162,15 +162,29 @@ const ANCHOR: Real = 1e9;
 /// `poses`, after at most `iterations` Gauss–Newton steps. Node 0 stays
 /// put. Stops early once a step moves no pose by more than 1e-6 m or rad.
 pub(crate) fn optimize(poses: &mut [Pose2], constraints: &[Constraint], iterations: usize) {
-    let n = poses.len();
-    if n < 2 {
+    optimize_from(poses, 0, constraints, iterations);
+}
+
+/// As [`optimize`], with the nodes before `first_free` held where they are:
+/// a constraint between a held node and a free one pulls only the free
+/// one, and one between held nodes is ignored. The free nodes must be
+/// joined to each other by the chain and, unless `first_free` is 0, the
+/// first of them to the node before it; the cost of a step is that of the
+/// free nodes and the constraints given, however many are held.
+pub(crate) fn optimize_from(
+    poses: &mut [Pose2],
+    first_free: usize,
+    constraints: &[Constraint],
+    iterations: usize,
+) {
+    if poses.len() < first_free + 2 {
         return;
     }
     for _ in 0..iterations {
-        let Some(normal) = linearize(poses, constraints) else { return };
+        let Some(normal) = linearize(poses, first_free, constraints) else { return };
         let Some(step) = solve(&normal) else { return };
         let mut largest: Real = 0.0;
-        for (p, d) in poses.iter_mut().zip(&step) {
+        for (p, d) in poses[first_free..].iter_mut().zip(&step) {
             *p = Pose2::new(p.x - d[0], p.y - d[1], p.theta - d[2]);
             largest = largest.max(d[0].abs()).max(d[1].abs()).max(d[2].abs());
         }
@@ -180,29 +194,43 @@ pub(crate) fn optimize(poses: &mut [Pose2], constraints: &[Constraint], iteratio
     }
 }
 
-/// The normal equations at `poses`; `None` if the chain is broken (a node
-/// not joined to the next).
-fn linearize(poses: &[Pose2], constraints: &[Constraint]) -> Option<Normal> {
-    let n = poses.len();
+/// The normal equations of the free nodes (`first_free..`) at `poses`,
+/// indexed from the first free one; `None` if the chain is broken (a free
+/// node not joined to the next).
+fn linearize(poses: &[Pose2], first_free: usize, constraints: &[Constraint]) -> Option<Normal> {
+    let n = poses.len() - first_free;
     let mut normal = Normal {
         diagonal: vec![ZERO; n],
         chain: vec![ZERO; n - 1],
         chords: Vec::new(),
         gradient: vec![[0.0; 3]; n],
     };
-    normal.diagonal[0] = [[ANCHOR, 0.0, 0.0], [0.0, ANCHOR, 0.0], [0.0, 0.0, ANCHOR]];
+    if first_free == 0 {
+        normal.diagonal[0] = [[ANCHOR, 0.0, 0.0], [0.0, ANCHOR, 0.0], [0.0, 0.0, ANCHOR]];
+    }
     let mut joined = vec![false; n - 1];
     for c in constraints {
-        let (i, j) = (c.from, c.to);
-        let (e, ja, jb) = error_and_jacobians(c, &poses[i], &poses[j]);
+        let (free_from, free_to) = (c.from >= first_free, c.to >= first_free);
+        if !(free_from || free_to) {
+            continue;
+        }
+        let (e, ja, jb) = error_and_jacobians(c, &poses[c.from], &poses[c.to]);
         let weight = if c.robust { cauchy(chi2(&c.information, &e)) } else { 1.0 };
         let omega = scale(&c.information, weight);
         let (jat, jbt) = (transpose(&ja), transpose(&jb));
         let (ja_o, jb_o) = (mul(&jat, &omega), mul(&jbt, &omega));
-        normal.diagonal[i] = add(&normal.diagonal[i], &mul(&ja_o, &ja));
-        normal.diagonal[j] = add(&normal.diagonal[j], &mul(&jb_o, &jb));
-        add_to(&mut normal.gradient[i], apply(&ja_o, e));
-        add_to(&mut normal.gradient[j], apply(&jb_o, e));
+        let (i, j) = (c.from.wrapping_sub(first_free), c.to.wrapping_sub(first_free));
+        if free_from {
+            normal.diagonal[i] = add(&normal.diagonal[i], &mul(&ja_o, &ja));
+            add_to(&mut normal.gradient[i], apply(&ja_o, e));
+        }
+        if free_to {
+            normal.diagonal[j] = add(&normal.diagonal[j], &mul(&jb_o, &jb));
+            add_to(&mut normal.gradient[j], apply(&jb_o, e));
+        }
+        if !(free_from && free_to) {
+            continue;
+        }
         let (lo, hi, block) = if i < j { (i, j, mul(&ja_o, &jb)) } else { (j, i, mul(&jb_o, &ja)) };
         if hi == lo + 1 && !c.robust {
             normal.chain[lo] = add(&normal.chain[lo], &block);
@@ -394,5 +422,38 @@ mod tests {
         let worst = poses.iter().zip(&truth).map(|(p, t)| p.distance(t)).fold(0.0, Real::max);
         // Without the loss, the chain would take about half the 3 m.
         assert!(worst < 0.3, "a wrong loop moved a pose {worst} m");
+    }
+
+    #[test]
+    fn held_nodes_stay_and_the_free_ones_take_the_loop() {
+        let truth = square(10);
+        let mut constraints = chain(&truth, Pose2::new(0.0, 0.0, 0.01));
+        let start = dead_reckoned(&constraints);
+        let last = truth.len() - 1;
+        constraints.push(Constraint {
+            from: 0,
+            to: last,
+            measured: truth[last].relative_to(&truth[0]),
+            information: info(0.02, 0.005),
+            robust: false,
+        });
+        let loop_error = |poses: &[Pose2]| constraint_chi2(constraints.last().unwrap(), poses);
+        // Only the last ten nodes free: the others stay bit for bit, and
+        // the loop's error falls all the same.
+        let mut held = start.clone();
+        optimize_from(&mut held, last - 9, &constraints, 10);
+        assert!(held[..last - 9].iter().zip(&start).all(|(h, s)| h == s));
+        assert!(held[last - 9..].iter().zip(&start[last - 9..]).any(|(h, s)| h != s));
+        assert!(
+            loop_error(&held) < 0.01 * loop_error(&start),
+            "{} -> {}",
+            loop_error(&start),
+            loop_error(&held)
+        );
+        // With none held it is the whole graph's optimization, exactly.
+        let (mut all, mut from_zero) = (start.clone(), start.clone());
+        optimize(&mut all, &constraints, 10);
+        optimize_from(&mut from_zero, 0, &constraints, 10);
+        assert_eq!(all, from_zero);
     }
 }

@@ -49,7 +49,7 @@ use squall_core::sensor::LaserReading;
 
 use crate::pf::trajectory::blend;
 use field::Field;
-use graph::{Constraint, constraint_chi2, optimize};
+use graph::{Constraint, constraint_chi2, optimize, optimize_from};
 use search::{Found, Window, search};
 
 /// The back end's settings: the params of the `slam.backend` bolt.
@@ -77,6 +77,14 @@ pub struct BackendOptions {
     pub min_loop_path: Real,
     /// Every this many nodes is searched.
     pub search_every: usize,
+    /// A loop found mid-run bends at most this many of the latest nodes,
+    /// the older ones held (a local optimization, as in ORB-SLAM's local
+    /// bundle adjustment); the whole graph is optimized at the end and
+    /// whenever it has doubled since it last was. Bounds the cost of a
+    /// long run's loops: without it every loop re-optimizes the whole
+    /// graph, and a run that comes back to the same rooms for hours costs
+    /// time quadratic in its length.
+    pub window_nodes: usize,
     /// Cell size of the submaps' fields, metres.
     pub resolution: Real,
     /// Beams used up to this range when the map is rebuilt along the
@@ -97,6 +105,7 @@ impl Default for BackendOptions {
             min_score: 0.55,
             min_loop_path: 30.0,
             search_every: 2,
+            window_nodes: 1000,
             resolution: 0.05,
             map_range: 80.0,
         }
@@ -126,8 +135,8 @@ impl BackendOptions {
         if !(0.0..=1.0).contains(&self.min_score) {
             return Err(format!("min_score must be in [0, 1], got {}", self.min_score));
         }
-        if self.submap_nodes == 0 || self.search_every == 0 {
-            return Err("submap_nodes and search_every must be ≥ 1".to_string());
+        if self.submap_nodes == 0 || self.search_every == 0 || self.window_nodes < 2 {
+            return Err("submap_nodes and search_every must be ≥ 1, window_nodes ≥ 2".to_string());
         }
         if self.reach / self.resolution > 2000.0 || self.range / self.resolution > 4000.0 {
             return Err(format!(
@@ -192,6 +201,9 @@ pub struct BackendReport {
     pub loops: usize,
     /// Optimizations run.
     pub optimizations: usize,
+    /// Of those, the ones over the whole graph (the rest bent only the
+    /// latest `window_nodes`).
+    pub full_optimizations: usize,
     /// Largest move of a node by the optimization, metres.
     pub largest_move: Real,
 }
@@ -309,7 +321,7 @@ pub fn close_loops(
     for k in 1..n {
         path[k] = path[k - 1] + front[k].distance(&front[k - 1]);
     }
-    let mut constraints: Vec<Constraint> = (1..n)
+    let chain: Vec<Constraint> = (1..n)
         .map(|k| {
             let measured = front[k].relative_to(&front[k - 1]);
             let metres = measured.x.hypot(measured.y);
@@ -324,9 +336,16 @@ pub fn close_loops(
             }
         })
         .collect();
+    let mut loops: Vec<Constraint> = Vec::new();
     let per = options.submap_nodes.max(1);
     let submaps = n.div_ceil(per);
-    let mut estimate = front.clone();
+    // The nodes' estimates up to the one searched; a node not reached yet
+    // is `carry ∘ front`, moved rigidly with the last node optimized.
+    let mut estimate: Vec<Pose2> = Vec::with_capacity(n);
+    let mut carry = Pose2::IDENTITY;
+    let mut nearby = SubmapIndex::new(options.reach);
+    // Nodes in the graph at the last optimization over all of it.
+    let mut last_full = 0;
     let mut fields: Vec<Option<Field>> = vec![None; submaps];
     let mut built_order: Vec<usize> = Vec::new();
     // A match that disagrees with the poses so far, waiting for a second
@@ -334,13 +353,21 @@ pub fn close_loops(
     // correction).
     let mut pending: Option<(Constraint, usize, Pose2)> = None;
     let (reach, turn) = (options.reach, options.turn);
+    let window = options.window_nodes.max(2);
     for j in (0..n).step_by(options.search_every.max(1)) {
+        while estimate.len() <= j {
+            estimate.push(carry.compose(&front[estimate.len()]));
+        }
         if kept[j].points.len() < MIN_POINTS {
             continue;
         }
+        // Submaps no local optimization will move again (all their nodes
+        // before the window of any later one) join the index.
+        nearby.settle(j.saturating_sub(window), per, &estimate);
         let mut disagrees = false;
         // The old enough submaps near node j, nearest first.
-        let mut candidates: Vec<(Real, usize)> = (0..submaps)
+        let mut candidates: Vec<(Real, usize)> = nearby
+            .near(&estimate[j], (j + 1) / per)
             .filter_map(|s| {
                 let (members, _) = submap_nodes(s, per, n);
                 if members.end > j || path[j] - path[members.end - 1] < options.min_loop_path {
@@ -375,7 +402,7 @@ pub fn close_loops(
             };
             let c = constraint(&found);
             if constraint_chi2(&c, &estimate) <= CONSISTENT_CHI2 {
-                constraints.push(c);
+                loops.push(c);
                 report.loops += 1;
                 continue;
             }
@@ -395,7 +422,7 @@ pub fn close_loops(
                     if j - at_node <= VERIFY_WITHIN * options.search_every
                         && agree(&earlier, &correction, &estimate[j]) =>
                 {
-                    constraints.extend([first, c]);
+                    loops.extend([first, c]);
                     report.loops += 2;
                     disagrees = true;
                 }
@@ -408,21 +435,33 @@ pub fn close_loops(
             fields[old] = None;
         }
         if disagrees {
-            let prefix: Vec<Constraint> =
-                constraints.iter().filter(|c| c.from.max(c.to) <= j).copied().collect();
-            let before = estimate[j];
-            optimize(&mut estimate[..=j], &prefix, STEPS_INCREMENTAL);
+            // The whole graph while it fits the window, and each time it
+            // has doubled; otherwise only the latest nodes, the older held.
+            let first_free = if j < window || j + 1 >= 2 * last_full { 0 } else { j + 1 - window };
+            let touching = chain[first_free.saturating_sub(1)..j]
+                .iter()
+                .chain(loops.iter().filter(|c| c.to >= first_free))
+                .copied()
+                .collect::<Vec<_>>();
+            optimize_from(&mut estimate[..=j], first_free, &touching, STEPS_INCREMENTAL);
             report.optimizations += 1;
-            // The nodes not yet in the graph follow node j rigidly.
-            let moved = estimate[j].compose(&before.inverse());
-            for e in &mut estimate[j + 1..] {
-                *e = moved.compose(e);
+            if first_free == 0 {
+                report.full_optimizations += 1;
+                last_full = j + 1;
+                nearby.clear();
             }
+            // The nodes not yet in the graph follow node j rigidly.
+            carry = estimate[j].compose(&front[j].inverse());
         }
     }
     if report.loops == 0 {
         return (trajectory.to_vec(), report);
     }
+    while estimate.len() < n {
+        estimate.push(carry.compose(&front[estimate.len()]));
+    }
+    let mut constraints = chain;
+    constraints.extend(loops);
     optimize(&mut estimate, &constraints, STEPS_FINAL);
     // Then again with the loops under the robust loss, so that a loop the
     // others do not bear out counts for little.
@@ -431,8 +470,72 @@ pub fn close_loops(
     }
     optimize(&mut estimate, &constraints, STEPS_FINAL);
     report.optimizations += 2;
+    report.full_optimizations += 2;
     report.largest_move = estimate.iter().zip(&front).map(|(e, f)| e.distance(f)).fold(0.0, Real::max);
     (apply_corrections(trajectory, &at, &front, &estimate), report)
+}
+
+/// The submaps by where their nodes are: each settled submap (one whose
+/// nodes no local optimization moves again) listed in the cells of its
+/// nodes' estimates, so that the submaps near a node are found without
+/// looking at every one; the unsettled ones, the latest few, are listed
+/// whole. Cleared when an optimization over the whole graph moves the
+/// settled ones.
+#[derive(Debug)]
+struct SubmapIndex {
+    /// Cell size, the search's reach: a node within it of another lies in
+    /// the other's cell or one of the eight around.
+    cell: Real,
+    cells: std::collections::HashMap<(i64, i64), Vec<usize>>,
+    /// Submaps `0..settled` are in `cells`.
+    settled: usize,
+}
+
+impl SubmapIndex {
+    fn new(cell: Real) -> Self {
+        SubmapIndex { cell, cells: std::collections::HashMap::new(), settled: 0 }
+    }
+
+    fn key(&self, p: &Pose2) -> (i64, i64) {
+        ((p.x / self.cell).floor() as i64, (p.y / self.cell).floor() as i64)
+    }
+
+    /// Lists every submap whose nodes all lie before `held` (of `per`
+    /// nodes each) by its nodes' `estimate`s.
+    fn settle(&mut self, held: usize, per: usize, estimate: &[Pose2]) {
+        while (self.settled + 1) * per <= held {
+            let s = self.settled;
+            for p in &estimate[s * per..(s + 1) * per] {
+                let list = self.cells.entry(self.key(p)).or_default();
+                if list.last() != Some(&s) {
+                    list.push(s);
+                }
+            }
+            self.settled += 1;
+        }
+    }
+
+    /// Forgets every submap's place (the whole graph moved).
+    fn clear(&mut self) {
+        self.cells.clear();
+        self.settled = 0;
+    }
+
+    /// The submaps that may have a node within a cell of `at`, each once:
+    /// the settled ones listed near it, then every unsettled one before
+    /// `upto`.
+    fn near(&self, at: &Pose2, upto: usize) -> impl Iterator<Item = usize> {
+        let (cx, cy) = self.key(at);
+        let mut listed: Vec<usize> = (-1..=1)
+            .flat_map(|dx| (-1..=1).map(move |dy| (cx.saturating_add(dx), cy.saturating_add(dy))))
+            .filter_map(|k| self.cells.get(&k))
+            .flatten()
+            .copied()
+            .collect();
+        listed.sort_unstable();
+        listed.dedup();
+        listed.into_iter().chain(self.settled..upto.max(self.settled))
+    }
 }
 
 /// The field of submap `members`, in `anchor`'s frame, placed by the
@@ -632,5 +735,54 @@ mod tests {
         let e = BackendOptions { resolution: 1e-6, ..BackendOptions::default() }.check().unwrap_err();
         assert!(e.contains("cells"), "{e}");
         assert!(BackendOptions::default().check().is_ok());
+    }
+
+    /// The truth of `truth` driven `laps` times: the loop, then the loop
+    /// again from its start.
+    fn laps(laps: usize) -> Vec<Pose2> {
+        let one = truth();
+        // One lap is the corridor's four sides; the tail beyond it is the
+        // 12 m past the start.
+        let lap = one.len() - 48;
+        let mut poses: Vec<Pose2> = (0..laps).flat_map(|_| one[..lap].iter().copied()).collect();
+        poses.extend_from_slice(&one[lap..]);
+        poses
+    }
+
+    #[test]
+    fn a_window_bends_only_the_latest_nodes_and_still_closes_the_loops() {
+        let truth = laps(3);
+        let front = drifting(&truth, 0.0012);
+        let before = mean_error(&front.iter().map(|p| (0.0, *p)).collect::<Vec<_>>(), &truth);
+        let (whole, whole_report) = run(&truth, &front, &BackendOptions::default());
+        let small = BackendOptions { window_nodes: 20, ..BackendOptions::default() };
+        let (windowed, report) = run(&truth, &front, &small);
+        // Some loops mid-run were optimized over the window only.
+        assert!(report.full_optimizations < report.optimizations, "{report:?}");
+        assert_eq!(whole_report.full_optimizations, whole_report.optimizations, "{whole_report:?}");
+        let (after_whole, after_window) = (mean_error(&whole, &truth), mean_error(&windowed, &truth));
+        assert!(after_window < 0.5 * before, "mean error {before} -> {after_window} m ({report:?})");
+        assert!(after_window < 1.5 * after_whole + 0.02, "window {after_window} m, whole {after_whole} m");
+    }
+
+    #[test]
+    fn the_index_finds_every_submap_within_reach() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let (per, reach) = (4, 2.0);
+        let estimate: Vec<Pose2> = (0..400)
+            .map(|_| Pose2::new(rng.random_range(-15.0..15.0), rng.random_range(-15.0..15.0), 0.0))
+            .collect();
+        let mut index = SubmapIndex::new(reach);
+        index.settle(250, per, &estimate);
+        assert_eq!(index.settled, 62);
+        for _ in 0..200 {
+            let at = Pose2::new(rng.random_range(-16.0..16.0), rng.random_range(-16.0..16.0), 0.0);
+            let within = |s: &usize| (s * per..(s + 1) * per).any(|m| estimate[m].distance(&at) <= reach);
+            let brute: Vec<usize> = (0..100).filter(within).collect();
+            let mut found: Vec<usize> = index.near(&at, 100).filter(within).collect();
+            found.sort_unstable();
+            assert_eq!(found, brute);
+        }
     }
 }
