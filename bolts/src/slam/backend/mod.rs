@@ -337,6 +337,10 @@ pub fn close_loops(
         })
         .collect();
     let mut loops: Vec<Constraint> = Vec::new();
+    // The node searched when each loop was added: a loop's `to` is at most
+    // that, so the loops touching the nodes from k on were all added at k
+    // or later, a suffix of `loops`.
+    let mut added_at: Vec<usize> = Vec::new();
     let per = options.submap_nodes.max(1);
     let submaps = n.div_ceil(per);
     // The nodes' estimates up to the one searched; a node not reached yet
@@ -403,6 +407,7 @@ pub fn close_loops(
             let c = constraint(&found);
             if constraint_chi2(&c, &estimate) <= CONSISTENT_CHI2 {
                 loops.push(c);
+                added_at.push(j);
                 report.loops += 1;
                 continue;
             }
@@ -423,6 +428,7 @@ pub fn close_loops(
                         && agree(&earlier, &correction, &estimate[j]) =>
                 {
                     loops.extend([first, c]);
+                    added_at.extend([j, j]);
                     report.loops += 2;
                     disagrees = true;
                 }
@@ -438,9 +444,10 @@ pub fn close_loops(
             // The whole graph while it fits the window, and each time it
             // has doubled; otherwise only the latest nodes, the older held.
             let first_free = if j < window || j + 1 >= 2 * last_full { 0 } else { j + 1 - window };
+            let recent = added_at.partition_point(|&at| at < first_free);
             let touching = chain[first_free.saturating_sub(1)..j]
                 .iter()
-                .chain(loops.iter().filter(|c| c.to >= first_free))
+                .chain(loops[recent..].iter().filter(|c| c.to >= first_free))
                 .copied()
                 .collect::<Vec<_>>();
             optimize_from(&mut estimate[..=j], first_free, &touching, STEPS_INCREMENTAL);
