@@ -744,8 +744,8 @@ mod tests {
         assert!(BackendOptions::default().check().is_ok());
     }
 
-    /// The truth of `truth` driven `laps` times: the loop, then the loop
-    /// again from its start.
+    /// [`truth`]'s loop around the corridor driven `laps` times, then the
+    /// 12 m past the start.
     fn laps(laps: usize) -> Vec<Pose2> {
         let one = truth();
         // One lap is the corridor's four sides; the tail beyond it is the
