@@ -383,15 +383,15 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_loop_closure_pulls_a_drifting_chain_back() {
-        // Every step turns 0.01 rad too far: the square does not close.
+    /// A square whose every step turns 0.01 rad too far, so that it does
+    /// not close, and a loop constraint from its last node to its first:
+    /// the truth, the constraints (the loop last) and the dead-reckoned
+    /// poses.
+    fn drifting_square_with_its_loop() -> (Vec<Pose2>, Vec<Constraint>, Vec<Pose2>) {
         let truth = square(10);
         let mut constraints = chain(&truth, Pose2::new(0.0, 0.0, 0.01));
-        let mut poses = dead_reckoned(&constraints);
+        let poses = dead_reckoned(&constraints);
         let last = truth.len() - 1;
-        let drift = poses[last].distance(&truth[last]);
-        assert!(drift > 1.0, "the chain drifts {drift} m");
         constraints.push(Constraint {
             from: 0,
             to: last,
@@ -399,6 +399,15 @@ mod tests {
             information: info(0.02, 0.005),
             robust: false,
         });
+        (truth, constraints, poses)
+    }
+
+    #[test]
+    fn a_loop_closure_pulls_a_drifting_chain_back() {
+        let (truth, constraints, mut poses) = drifting_square_with_its_loop();
+        let last = truth.len() - 1;
+        let drift = poses[last].distance(&truth[last]);
+        assert!(drift > 1.0, "the chain drifts {drift} m");
         optimize(&mut poses, &constraints, 10);
         let worst = poses.iter().zip(&truth).map(|(p, t)| p.distance(t)).fold(0.0, Real::max);
         assert!(worst < 0.1 * drift, "worst {worst} m after closing, drift was {drift}");
@@ -426,17 +435,8 @@ mod tests {
 
     #[test]
     fn held_nodes_stay_and_the_free_ones_take_the_loop() {
-        let truth = square(10);
-        let mut constraints = chain(&truth, Pose2::new(0.0, 0.0, 0.01));
-        let start = dead_reckoned(&constraints);
+        let (truth, constraints, start) = drifting_square_with_its_loop();
         let last = truth.len() - 1;
-        constraints.push(Constraint {
-            from: 0,
-            to: last,
-            measured: truth[last].relative_to(&truth[0]),
-            information: info(0.02, 0.005),
-            robust: false,
-        });
         let loop_error = |poses: &[Pose2]| constraint_chi2(constraints.last().unwrap(), poses);
         // Only the last ten nodes free: the others stay bit for bit, and
         // the loop's error falls all the same.
