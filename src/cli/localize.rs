@@ -155,6 +155,12 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
     // (docs/decisions/0020-depth-recovery-and-occlusion.md).
     if args.input == "depth" {
         sets.push("matcher.params.occlusion_fits=true".into());
+        // A depth frame's thousand points make the likelihood's peak a few
+        // millimetres wide: refinement ends at it, and a corner seen does
+        // not count against the true pose
+        // (docs/decisions/0023-corners-and-the-peak-of-the-likelihood.md).
+        sets.push("matcher.params.newton_step=true".into());
+        sets.push("matcher.params.leave_out_corners=true".into());
     }
     match args.init.as_str() {
         "global" => {

@@ -74,6 +74,10 @@ struct CgrParams {
     /// Points short of the map count as fitting in augmented MCL's test
     /// for a lost robot (a depth camera's view filled by a person).
     occlusion_fits: bool,
+    /// Points at corners facing the other wall are left out (depth).
+    leave_out_corners: bool,
+    /// Refinement ends with a whole-curvature Newton step (depth).
+    newton_step: bool,
     /// Augmented MCL (random particles when observations stop fitting):
     /// off by default; `injection = true` with `alpha_slow`, `alpha_fast`,
     /// `min_drop` and `lost_share`.
@@ -119,6 +123,8 @@ impl Default for CgrParams {
             refine_iterations: c.refine_iterations,
             outlier_sigmas: c.outlier_sigmas,
             occlusion_fits: c.occlusion_fits,
+            leave_out_corners: c.leave_out_corners,
+            newton_step: c.newton_step,
             injection: o.injection.is_some(),
             alpha_slow: injection.alpha_slow,
             alpha_fast: injection.alpha_fast,
@@ -182,6 +188,8 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
         refine_iterations: p.refine_iterations,
         outlier_sigmas: p.outlier_sigmas,
         occlusion_fits: p.occlusion_fits,
+        leave_out_corners: p.leave_out_corners,
+        newton_step: p.newton_step,
     };
     cgr.check()?;
     crate::error::positive("cell", p.cell)?;

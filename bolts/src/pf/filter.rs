@@ -25,6 +25,9 @@ pub struct StepReport {
     pub moved: Moved,
     /// Particles redrawn at random (augmented MCL).
     pub injected: usize,
+    /// Each particle's corrected pose and normalized weight before
+    /// resampling, in slot order (for diagnostics against ground truth).
+    pub weighed: Vec<(Pose2, Real)>,
 }
 
 /// A particle filter over `model`, its particles split over K shards.
@@ -180,6 +183,7 @@ where
             update_work,
             moved: moved_now,
             injected: decision.fresh.len(),
+            weighed: reports.iter().zip(&decision.weights).map(|(r, &w)| (r.pose, w)).collect(),
         }
     }
 

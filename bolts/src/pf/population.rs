@@ -155,7 +155,10 @@ impl Population {
         let grown = kld
             .filter(|_| share > 0.0)
             .map(|k| ((share * k.max as Real).ceil() as usize).clamp(k.min, k.max));
-        let resampled = neff < threshold * n as Real || grown.is_some();
+        // Redrawn particles join a resampled set, whose weights start
+        // equal: in a set kept as it was, a redrawn one would inherit the
+        // weight its slot had gathered for another pose.
+        let resampled = neff < threshold * n as Real || grown.is_some() || share > 0.0;
         let count = match kld {
             Some(k) if resampled => {
                 k.count(&weights, |i| reports[i].0, self.seed, step).max(grown.unwrap_or(0))
@@ -516,6 +519,7 @@ mod tests {
             correct(&mut fixed, step, -0.05, None);
         }
         let d = correct(&mut fixed, 21, -2.05, None);
+        assert!(d.resampled, "redrawn particles join a resampled set, their weights equal");
         assert_eq!(fixed.len(), 50);
         assert!(d.fresh.len() >= 15, "about half of 50 redrawn: {}", d.fresh.len());
     }
