@@ -12,7 +12,7 @@
 //! start, growing to 2000 when lost) and the robot is carried 5–20 m
 //! at that second, as `squall localize --kidnap-at` does.
 //!
-//! See docs/decisions/0020.
+//! See docs/decisions/0023.
 
 use std::sync::Arc;
 

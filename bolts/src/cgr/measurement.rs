@@ -117,7 +117,8 @@ pub struct Evaluation {
     /// Gauss–Newton curvature, for step sizes), divided by fσ².
     pub curvature: [Real; 3],
     /// The off-diagonal terms of the same Gauss–Newton curvature, (x, y),
-    /// (x, θ), (y, θ): with `curvature`, the whole 3 × 3 matrix.
+    /// (x, θ), (y, θ): with `curvature`, the whole 3 × 3 matrix. Summed
+    /// only with [`CgrOptions::newton_step`], zero otherwise.
     pub cross: [Real; 3],
     /// Points used.
     pub matched: usize,
@@ -184,9 +185,12 @@ pub fn evaluate(
             e.gradient[k] -= d * dk * per_variance;
             e.curvature[k] += dk * dk * per_variance;
         }
-        e.cross[0] += dd[0] * dd[1] * per_variance;
-        e.cross[1] += dd[0] * dd[2] * per_variance;
-        e.cross[2] += dd[1] * dd[2] * per_variance;
+        // Only the Newton step reads the off-diagonal terms.
+        if o.newton_step {
+            e.cross[0] += dd[0] * dd[1] * per_variance;
+            e.cross[1] += dd[0] * dd[2] * per_variance;
+            e.cross[2] += dd[1] * dd[2] * per_variance;
+        }
         e.matched += 1;
     }
     e
@@ -236,10 +240,11 @@ fn at_corner(
 }
 
 /// The Gauss–Newton step to the likelihood's peak from the pose `e` was
-/// taken at, H⁻¹g with the whole curvature, its translation damped and
-/// the step cut to [`MAX_STEP`] as refinement's steps are; `None` when it would raise the
-/// log-likelihood by less than [`MIN_NEWTON_RISE`] (the pose is at its
-/// peak) or the curvature is singular.
+/// taken at (evaluated with [`CgrOptions::newton_step`], so that `e`
+/// holds the whole curvature), H⁻¹g with its translation damped and the
+/// step cut to [`MAX_STEP`] as refinement's steps are; `None` when it
+/// would raise the log-likelihood by less than [`MIN_NEWTON_RISE`] (the
+/// pose is at its peak) or the curvature is singular.
 pub fn newton_step(e: &Evaluation) -> Option<[Real; 3]> {
     let [a, d, f] = e.curvature;
     let [b, c, g] = e.cross;
@@ -579,7 +584,7 @@ mod tests {
         let map = LineMap::parse("square", "0,0,10,0\n10,0,10,10\n10,10,0,10\n0,10,0,0\n").unwrap();
         let truth = Pose2::new(3.0, 3.0, 0.4);
         let obs = observe(&map, &truth);
-        let o = CgrOptions::default();
+        let o = CgrOptions { newton_step: true, ..CgrOptions::default() };
         let at = |p: &Pose2| evaluate(&map, &scene_ids(&map, p), p, &obs, &o);
         let peak = at(&truth);
         assert!(newton_step(&peak).is_none(), "at the peak: no step");
@@ -588,11 +593,11 @@ mod tests {
             let short = peak.log_likelihood - at(&near).log_likelihood;
             assert!(short > 3.0, "{near:?} is {short} below the peak");
             // Without the setting and without damped steps, nothing moves.
-            let none = CgrOptions { refine_iterations: 0, ..o.clone() };
+            let none = CgrOptions { refine_iterations: 0, newton_step: false, ..o.clone() };
             assert_eq!(refine(&map, &mut lines_at, &near, &obs, &none).0, near);
             // The Newton step alone (no damped steps) closes most of the
             // gap; its translation damped, not all of it.
-            let alone = CgrOptions { refine_iterations: 0, newton_step: true, ..o.clone() };
+            let alone = CgrOptions { refine_iterations: 0, ..o.clone() };
             let (pose, e, evaluations) = refine(&map, &mut lines_at, &near, &obs, &alone);
             assert_eq!(evaluations, 2);
             let (gap, left) = (near.distance(&truth), pose.distance(&truth));
