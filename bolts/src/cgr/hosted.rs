@@ -74,6 +74,9 @@ struct CgrParams {
     /// Points short of the map count as fitting in augmented MCL's test
     /// for a lost robot (a depth camera's view filled by a person).
     occlusion_fits: bool,
+    /// The largest obstacle the map leaves out, metres (with
+    /// `occlusion_fits`).
+    occluder_size: Real,
     /// Points at corners facing the other wall are left out (depth).
     leave_out_corners: bool,
     /// Refinement ends with a whole-curvature Newton step (depth).
@@ -123,6 +126,7 @@ impl Default for CgrParams {
             refine_iterations: c.refine_iterations,
             outlier_sigmas: c.outlier_sigmas,
             occlusion_fits: c.occlusion_fits,
+            occluder_size: c.occluder_size,
             leave_out_corners: c.leave_out_corners,
             newton_step: c.newton_step,
             injection: o.injection.is_some(),
@@ -188,6 +192,7 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
         refine_iterations: p.refine_iterations,
         outlier_sigmas: p.outlier_sigmas,
         occlusion_fits: p.occlusion_fits,
+        occluder_size: p.occluder_size,
         leave_out_corners: p.leave_out_corners,
         newton_step: p.newton_step,
     };

@@ -44,6 +44,14 @@ pub struct CgrOptions {
     /// things hide only in part, and whose points short of the walls it
     /// expects are how a kidnapping shows. The default is false.
     pub occlusion_fits: bool,
+    /// With `occlusion_fits`, the widest thing the map leaves out that
+    /// can stand in view (a person, a box, a cart), metres: where short
+    /// points fill a wider stretch of the view (at their distance), they
+    /// are not an obstacle but walls the map does not have there, a place
+    /// other than the pose's, and every short point counts as an outlier
+    /// in the test for a lost robot ([`Evaluation::widest_short_run`]).
+    /// The default is 1.
+    pub occluder_size: Real,
     /// Leave out, rather than count as outliers, the points whose normal
     /// disagrees with the wall their ray meets but agrees with a wall
     /// within the outlier cap of them (a corner, a jamb): see
@@ -70,6 +78,7 @@ impl Default for CgrOptions {
             refine_iterations: 3,
             outlier_sigmas: 3.0,
             occlusion_fits: false,
+            occluder_size: 1.0,
             leave_out_corners: false,
             newton_step: false,
         }
@@ -90,6 +99,7 @@ impl CgrOptions {
             ("correlation", self.correlation),
             ("range", self.range),
             ("outlier_sigmas", self.outlier_sigmas),
+            ("occluder_size", self.occluder_size),
         ] {
             crate::error::positive(name, v)?;
         }
@@ -107,7 +117,7 @@ impl CgrOptions {
 
 /// The log-likelihood of an observation at a pose, its gradient with
 /// respect to (x, y, θ), and the points that found a wall.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Evaluation {
     /// log p(z | x, m) up to a constant.
     pub log_likelihood: Real,
@@ -129,6 +139,66 @@ pub struct Evaluation {
     /// behind a wall or facing the wrong way, they do not contradict the
     /// pose.
     pub short: usize,
+    /// The nearest short point's distance from the sensor in each of
+    /// [`SHORT_BINS`] sectors of bearing (robot frame), metres; infinite
+    /// where none fell: each run of sectors with short points is
+    /// something in the way, as wide as the run's arcs.
+    pub short_ranges: [f32; SHORT_BINS],
+}
+
+/// Sectors of bearing over the full turn in which short points are
+/// gathered, 5.6° each: at 2 m a sector is 0.2 m across.
+pub const SHORT_BINS: usize = 64;
+
+impl Default for Evaluation {
+    fn default() -> Self {
+        Evaluation {
+            log_likelihood: 0.0,
+            gradient: [0.0; 3],
+            curvature: [0.0; 3],
+            cross: [0.0; 3],
+            matched: 0,
+            short: 0,
+            short_ranges: [f32::INFINITY; SHORT_BINS],
+        }
+    }
+}
+
+impl Evaluation {
+    /// Counts a short point `(dx, dy)` from the sensor (robot frame).
+    fn add_short(&mut self, dx: Real, dy: Real) {
+        self.short += 1;
+        let turn = dy.atan2(dx) / std::f64::consts::TAU + 0.5;
+        let bin = ((turn * SHORT_BINS as Real) as usize).min(SHORT_BINS - 1);
+        let r = &mut self.short_ranges[bin];
+        *r = r.min(dx.hypot(dy) as f32);
+    }
+
+    /// How wide the widest thing in the way is, metres: over each run of
+    /// adjacent sectors holding short points (wrapping round), the sum of
+    /// their arcs at the nearest short point's distance; 0 without short
+    /// points. A person or a box fills a few sectors close up or one far
+    /// off; the walls of another place fill the view at metres.
+    pub fn widest_short_run(&self) -> Real {
+        let sector = std::f64::consts::TAU / SHORT_BINS as Real;
+        let arc = |k: usize| Real::from(self.short_ranges[k % SHORT_BINS]) * sector;
+        let held = |k: usize| self.short_ranges[k % SHORT_BINS].is_finite();
+        // Start after an empty sector, so that a run across the wrap is
+        // measured whole; a full circle of short points is one run.
+        let Some(start) = (0..SHORT_BINS).find(|&k| !held(k)) else {
+            return (0..SHORT_BINS).map(arc).sum();
+        };
+        let (mut widest, mut run): (Real, Real) = (0.0, 0.0);
+        for k in start + 1..=start + SHORT_BINS {
+            if held(k) {
+                run += arc(k);
+                widest = widest.max(run);
+            } else {
+                run = 0.0;
+            }
+        }
+        widest
+    }
 }
 
 /// Evaluates the observation at `pose` against the walls `lines` of `map`
@@ -154,7 +224,7 @@ pub fn evaluate(
             // Nothing on the map along the ray: the point is on something
             // the map does not hold, in free space.
             e.log_likelihood += outlier;
-            e.short += 1;
+            e.add_short(px - obs.sensor.0, py - obs.sensor.1);
             continue;
         };
         let w = &map.walls[line as usize];
@@ -166,7 +236,9 @@ pub fn evaluate(
             e.log_likelihood += outlier;
             // On the sensor's side of the wall the ray meets: in front of it.
             let sensor_side = lx * (sensor.0 - w.a.0) + ly * (sensor.1 - w.a.1);
-            e.short += usize::from(d * sensor_side > 0.0);
+            if d * sensor_side > 0.0 {
+                e.add_short(px - obs.sensor.0, py - obs.sensor.1);
+            }
             continue;
         }
         if (lx * wx + ly * wy).abs() < min_cos {
@@ -425,6 +497,35 @@ mod tests {
         ids.sort_unstable();
         ids.dedup();
         ids
+    }
+
+    #[test]
+    fn things_in_the_way_are_measured_one_by_one_across_the_view() {
+        let mut e = Evaluation::default();
+        assert_eq!(e.widest_short_run(), 0.0);
+        // A person 0.5 m across at 2 m, 30° left, and a box 0.4 m across
+        // at 1 m, 30° right: two things, each narrow.
+        let along = |e: &mut Evaluation, bearing_deg: Real, range: Real, width: Real| {
+            let b = bearing_deg.to_radians();
+            for k in 0..=20 {
+                let t = width * (k as Real / 20.0 - 0.5);
+                e.add_short(range * b.cos() - t * b.sin(), range * b.sin() + t * b.cos());
+            }
+        };
+        along(&mut e, 30.0, 2.0, 0.5);
+        along(&mut e, -30.0, 1.0, 0.4);
+        let w = e.widest_short_run();
+        assert!((0.4..=0.8).contains(&w), "{w}");
+        // A wall 4 m across at 3 m: another place's.
+        along(&mut e, 0.0, 3.0, 4.0);
+        let w = e.widest_short_run();
+        assert!(w > 3.0, "{w}");
+        // Behind the sensor, across the bearing where sectors wrap round:
+        // one thing, measured whole.
+        let mut behind = Evaluation::default();
+        along(&mut behind, 180.0, 2.0, 0.9);
+        let w = behind.widest_short_run();
+        assert!((0.8..=1.3).contains(&w), "{w}");
     }
 
     #[test]

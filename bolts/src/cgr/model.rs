@@ -312,14 +312,17 @@ impl CgrModel {
 /// short of the map (people, boxes: in free space, in front of the walls)
 /// count as fitting: any pose would see them so, and a person or a box
 /// filling a depth camera's view is no sign of being lost, while points
-/// behind walls or facing the wrong way are. −∞ for a reading without
+/// behind walls or facing the wrong way are; unless they fill a stretch of
+/// the view wider than `occluder_size`, as another place's walls do. −∞
+/// for a reading without
 /// points, which the injection rule passes over.
 fn fit(e: &Evaluation, input: &Observation2d, o: &CgrOptions) -> Real {
     let points = input.points.len();
     if points == 0 {
         return Real::NEG_INFINITY;
     }
-    let short = if o.occlusion_fits { e.short as Real } else { 0.0 };
+    let obstacles = e.widest_short_run() <= o.occluder_size;
+    let short = if o.occlusion_fits && obstacles { e.short as Real } else { 0.0 };
     (e.log_likelihood - short * o.outlier_log_likelihood()) / points as Real
 }
 
@@ -635,6 +638,46 @@ mod tests {
         let mut free = Pose2::new(15.0, 3.0, 0.0);
         let c = model(false).correct(&mut free, &blind, &mut (), &mut rng);
         assert!(free.x > 12.0 && c.log_likelihood > OUTSIDE_LOG_PRIOR / 2.0, "{free:?} {c:?}");
+    }
+
+    /// Points at 1.5 m ahead of the robot, `width` metres across, facing
+    /// it: at (5, 3) facing east in the room they lie in free space, 3.5 m
+    /// short of the east wall.
+    fn surface_ahead(width: f32) -> Observation2d {
+        let n = 41;
+        let points: Vec<[f32; 2]> =
+            (0..n).map(|k| [1.5, width * (k as f32 / (n - 1) as f32 - 0.5)]).collect();
+        let normals = vec![[-1.0, 0.0]; n];
+        Observation2d { points, normals, ..Observation2d::default() }
+    }
+
+    #[test]
+    fn an_obstacle_in_view_fits_and_a_place_the_map_lacks_does_not() {
+        let at = Pose2::new(5.0, 3.0, 0.0);
+        let with = |occlusion_fits: bool| {
+            let cgr = CgrOptions { occlusion_fits, refine_iterations: 0, ..CgrOptions::default() };
+            CgrModel::new(room(), None, LocalizeOptions { cgr, ..LocalizeOptions::default() }).unwrap()
+        };
+        let fit_of = |m: &CgrModel, obs: &Observation2d| {
+            let mut pose = at;
+            let c = m.correct(&mut pose, obs, &mut (), &mut ChaCha8Rng::seed_from_u64(1));
+            assert_eq!(pose, at, "no refinement asked for");
+            c.fit
+        };
+        let outliers = CgrOptions::default().outlier_log_likelihood();
+        // A person or a box 0.5 m across filling the view: every point
+        // short of the map, and no sign of being lost.
+        let person = surface_ahead(0.5);
+        assert!(fit_of(&with(true), &person).abs() < 1e-12);
+        assert!((fit_of(&with(false), &person) - outliers).abs() < 1e-12);
+        // A wall 3 m across where the map has open floor: the view of
+        // another place (a kidnapped robot's), however it is counted.
+        let elsewhere = surface_ahead(3.0);
+        assert!((fit_of(&with(true), &elsewhere) - outliers).abs() < 1e-12);
+        // Either side of the widest obstacle (1 m by default, measured in
+        // sectors of 5.6°, 0.15 m at this distance).
+        assert!(fit_of(&with(true), &surface_ahead(0.6)).abs() < 1e-12);
+        assert!((fit_of(&with(true), &surface_ahead(1.6)) - outliers).abs() < 1e-12);
     }
 
     #[test]
