@@ -314,8 +314,7 @@ impl CgrModel {
 /// filling a depth camera's view is no sign of being lost, while points
 /// behind walls or facing the wrong way are; unless they fill a stretch of
 /// the view wider than `occluder_size`, as another place's walls do. −∞
-/// for a reading without
-/// points, which the injection rule passes over.
+/// for a reading without points, which the injection rule passes over.
 fn fit(e: &Evaluation, input: &Observation2d, o: &CgrOptions) -> Real {
     let points = input.points.len();
     if points == 0 {
