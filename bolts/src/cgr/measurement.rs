@@ -141,7 +141,8 @@ pub struct Evaluation {
     pub short: usize,
     /// The nearest short point's distance from the sensor in each of
     /// [`SHORT_BINS`] sectors of bearing (robot frame), metres; infinite
-    /// where none fell: each run of sectors with short points is
+    /// where none fell (and everywhere without
+    /// [`CgrOptions::occlusion_fits`], which alone reads them): each run of sectors with short points is
     /// something in the way, as wide as the run's arcs.
     pub short_ranges: [f32; SHORT_BINS],
 }
@@ -165,9 +166,14 @@ impl Default for Evaluation {
 }
 
 impl Evaluation {
-    /// Counts a short point `(dx, dy)` from the sensor (robot frame).
-    fn add_short(&mut self, dx: Real, dy: Real) {
+    /// Counts a short point `(dx, dy)` from the sensor (robot frame), and
+    /// with `sectors` gathers it into [`Self::short_ranges`] (only the
+    /// lost test with `occlusion_fits` reads them).
+    fn add_short(&mut self, dx: Real, dy: Real, sectors: bool) {
         self.short += 1;
+        if !sectors {
+            return;
+        }
         let turn = dy.atan2(dx) / std::f64::consts::TAU + 0.5;
         let bin = ((turn * SHORT_BINS as Real) as usize).min(SHORT_BINS - 1);
         let r = &mut self.short_ranges[bin];
@@ -224,7 +230,7 @@ pub fn evaluate(
             // Nothing on the map along the ray: the point is on something
             // the map does not hold, in free space.
             e.log_likelihood += outlier;
-            e.add_short(px - obs.sensor.0, py - obs.sensor.1);
+            e.add_short(px - obs.sensor.0, py - obs.sensor.1, o.occlusion_fits);
             continue;
         };
         let w = &map.walls[line as usize];
@@ -237,7 +243,7 @@ pub fn evaluate(
             // On the sensor's side of the wall the ray meets: in front of it.
             let sensor_side = lx * (sensor.0 - w.a.0) + ly * (sensor.1 - w.a.1);
             if d * sensor_side > 0.0 {
-                e.add_short(px - obs.sensor.0, py - obs.sensor.1);
+                e.add_short(px - obs.sensor.0, py - obs.sensor.1, o.occlusion_fits);
             }
             continue;
         }
@@ -509,7 +515,7 @@ mod tests {
             let b = bearing_deg.to_radians();
             for k in 0..=20 {
                 let t = width * (k as Real / 20.0 - 0.5);
-                e.add_short(range * b.cos() - t * b.sin(), range * b.sin() + t * b.cos());
+                e.add_short(range * b.cos() - t * b.sin(), range * b.sin() + t * b.cos(), true);
             }
         };
         along(&mut e, 30.0, 2.0, 0.5);
