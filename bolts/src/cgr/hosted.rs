@@ -66,6 +66,8 @@ struct CgrParams {
     /// temporary folder, `squall-scenes`).
     cache_dir: Option<PathBuf>,
     sigma: Real,
+    /// Range-dependent noise: σ² + (this × r²)² per point (depth).
+    noise_per_r2: Real,
     correlation: Real,
     normal_tolerance_deg: Real,
     range: Real,
@@ -120,6 +122,7 @@ impl Default for CgrParams {
             cell: 0.2,
             cache_dir: None,
             sigma: c.sigma,
+            noise_per_r2: c.noise_per_r2,
             correlation: c.correlation,
             normal_tolerance_deg: c.normal_tolerance_deg,
             range: c.range,
@@ -186,6 +189,7 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
     };
     let cgr = CgrOptions {
         sigma: p.sigma,
+        noise_per_r2: p.noise_per_r2,
         correlation: p.correlation,
         normal_tolerance_deg: p.normal_tolerance_deg,
         range: p.range,
