@@ -233,11 +233,20 @@ pub fn evaluate(
         (1.0 / (o.correlation * o.sigma * o.sigma), o.outlier_sigmas * o.sigma);
     let min_cos = o.normal_tolerance_deg.to_radians().cos();
     let outlier = o.outlier_log_likelihood();
+    let range2 = o.range * o.range;
     let mut e = Evaluation::default();
     for (p, n) in obs.points.iter().zip(&obs.normals) {
         let (px, py) = (Real::from(p[0]), Real::from(p[1]));
+        let r2 = (px - obs.sensor.0).powi(2) + (py - obs.sensor.1).powi(2);
+        if r2 > range2 {
+            // Beyond the observable scene, which holds the walls within
+            // `range`: nothing to match the point to, and no sign either
+            // way (a depth camera's 8 m of depth reach 9.7 m at the edges
+            // of its 69° view; a laser's points are cut at its range).
+            continue;
+        }
         let (per_variance, cap) = if o.noise_per_r2 > 0.0 {
-            let ranged = o.noise_per_r2 * ((px - obs.sensor.0).powi(2) + (py - obs.sensor.1).powi(2));
+            let ranged = o.noise_per_r2 * r2;
             let variance = o.sigma * o.sigma + ranged * ranged;
             (1.0 / (o.correlation * variance), o.outlier_sigmas * variance.sqrt())
         } else {
@@ -569,7 +578,8 @@ mod tests {
             .filter(|&k| {
                 let (p, n) = (obs.points[k], obs.normals[k]);
                 let r = p[0].hypot(p[1]);
-                r > 1.0 && (p[0] * n[0] + p[1] * n[1]).abs() / r > 0.7
+                // Pushed, still within range (beyond it a point is left out).
+                r > 1.0 && r < o.range as f32 - 0.5 && (p[0] * n[0] + p[1] * n[1]).abs() / r > 0.7
             })
             .step_by(5)
             .collect();
@@ -710,6 +720,13 @@ mod tests {
         assert!((a - b).abs() < 0.01 * a.abs(), "{a} vs {b}");
         assert!(ranged.check().is_ok());
         assert!(CgrOptions { noise_per_r2: -1.0, ..ranged }.check().is_err());
+        // Beyond `range` (8 m) a point is left out: neither matched nor an
+        // outlier, nor short.
+        let beyond_map = LineMap::parse("beyond", "9,-5,9,5\n").unwrap();
+        for o in [&fixed, &ranged] {
+            let e = evaluate(&beyond_map, &lines, &Pose2::IDENTITY, &at(9.3), o);
+            assert_eq!((e.matched, e.log_likelihood, e.short), (0, 0.0, 0));
+        }
     }
 
     #[test]
