@@ -36,8 +36,9 @@ pub struct CgrOptions {
     /// A point is used only if its normal is within this angle of its
     /// wall's, degrees. The default is 30.
     pub normal_tolerance_deg: Real,
-    /// Walls farther than this are not in the observable scene, metres.
-    /// The default is 8.
+    /// Walls farther than this are not in the observable scene, and
+    /// points farther from the sensor are left out, metres. The default
+    /// is 8.
     pub range: Real,
     /// Gradient steps per particle per observation. The default is 3.
     pub refine_iterations: u32,
