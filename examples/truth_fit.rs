@@ -10,11 +10,19 @@
 //! a likelihood that prefers a wrong pose; points the truth cannot match
 //! at one distance are what the model gets wrong there.
 //!
-//! `cargo run --release --example truth_fit -- MAP SEED [SECONDS [NOISE_PER_Z2 [PEOPLE]]]`
+//! `cargo run --release --example truth_fit -- MAP SEED [SECONDS [NOISE_PER_Z2 [PEOPLE [OCCLUDERS]]]]`
 //!
 //! NOISE_PER_Z2 (default 0.0015, the simulated D435's) is the camera's
 //! noise law for FSPF's `noise_per_z2` and CGR's `noise_per_r2` both; 0
 //! gives the defaults' fixed ε. PEOPLE defaults to 5, as the simulator's.
+//! OCCLUDERS 1 sets CGR's `leave_out_occluders` (default 0).
+//!
+//! With `ALL_LINES=1` in the environment, each distance bin also says
+//! how many points match with every wall of the map as the scene, and
+//! how many with any normal accepted and no outlier cap (are the scene
+//! lists or the normals to blame?). With `DUMP_AT=SECONDS`, the frame at
+//! that time lists every seventh point beyond 4 m: where it lies at the
+//! truth, its normal's direction, and the wall its ray meets.
 //!
 //! See docs/decisions/0026.
 
@@ -43,6 +51,7 @@ fn main() {
     let seconds: f64 = a.get(2).map_or(20.0, |s| s.parse().unwrap());
     let noise: f64 = a.get(3).map_or(0.0015, |s| s.parse().unwrap());
     let people: usize = a.get(4).map_or(5, |s| s.parse().unwrap());
+    let leave_out_occluders = a.get(5).is_some_and(|s| s == "1");
     let floor = floor_for(map, seed).unwrap();
     let world = Arc::new(floor.world.clone());
     let camera = DepthCamera::d435_on_robot();
@@ -51,6 +60,7 @@ fn main() {
         leave_out_corners: true,
         newton_step: true,
         noise_per_r2: noise,
+        leave_out_occluders,
         ..CgrOptions::default()
     };
     let grid = Arc::new(SceneGrid::build(&world, 0.2, cgr.range, 2).unwrap());
@@ -114,9 +124,48 @@ fn main() {
             }
             let e = evaluate(&world, lines, &at_truth, &part, &options.cgr);
             row += &format!(" {:4} {:4} {:7.1}", part.points.len(), e.matched, e.log_likelihood);
+            if std::env::var("ALL_LINES").is_ok() {
+                let all: Vec<u32> = (0..world.walls.len() as u32).collect();
+                let e = evaluate(&world, &all, &at_truth, &part, &options.cgr);
+                let wide =
+                    CgrOptions { normal_tolerance_deg: 90.0, outlier_sigmas: 100.0, ..options.cgr.clone() };
+                let w = evaluate(&world, lines, &at_truth, &part, &wide);
+                row += &format!(
+                    " (all lines: {} short {}; any normal, no cap: {})",
+                    e.matched, e.short, w.matched
+                );
+            }
             totals[k].0 += part.points.len();
             totals[k].1 += e.matched;
             totals[k].2 += e.log_likelihood;
+        }
+        if std::env::var("DUMP_AT").is_ok_and(|t| (t.parse::<f64>().unwrap() - obs.stamp).abs() < 0.05) {
+            let t = at_truth;
+            let (s, c) = t.theta.sin_cos();
+            let sensor =
+                (t.x + c * obs.sensor.0 - s * obs.sensor.1, t.y + s * obs.sensor.0 + c * obs.sensor.1);
+            for (p, n) in obs.points.iter().zip(&obs.normals).step_by(7) {
+                let (px, py) = (f64::from(p[0]), f64::from(p[1]));
+                let r = (px - obs.sensor.0).hypot(py - obs.sensor.1);
+                if r < 4.0 {
+                    continue;
+                }
+                let q = (t.x + c * px - s * py, t.y + s * px + c * py);
+                let nw =
+                    (c * f64::from(n[0]) - s * f64::from(n[1]), s * f64::from(n[0]) + c * f64::from(n[1]));
+                let hit = squall_core::visibility::first_hit(&world, lines.iter().copied(), sensor, q);
+                let wall = hit.map(|(l, _)| {
+                    let w = &world.walls[l as usize];
+                    ((w.b.1 - w.a.1).atan2(w.b.0 - w.a.0).to_degrees(), *w)
+                });
+                println!(
+                    "   r={r:.2} q=({:.2},{:.2}) normal={:.0}deg wall={:?}",
+                    q.0,
+                    q.1,
+                    nw.1.atan2(nw.0).to_degrees(),
+                    wall
+                );
+            }
         }
         let heading = normalize_angle(best.theta - truth.theta).to_degrees();
         println!(

@@ -3,10 +3,9 @@
 //! points of each, and keeps the neighbourhood's points that a local
 //! RANSAC check finds on that plane, with its normal (with the camera's
 //! noise law, `noise_per_z2`, refitted to them by least squares; see
-//! [`refit`]).
-//! Walls, floor and ceiling survive; clutter and people mostly do not. The output buffers
-//! are reused from frame to frame, so filtering allocates nothing once
-//! warm.
+//! [`refit`]). Walls, floor and ceiling survive; clutter and people
+//! mostly do not. The output buffers are reused from frame to frame, so
+//! filtering allocates nothing once warm.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -46,7 +45,7 @@ pub struct FspfOptions {
     /// its plane as on it: with the fixed ε alone, a wall whose noise
     /// exceeds ε fails the check however flat it is, and no wall beyond a
     /// few metres is kept (about 3.5 m for the simulated D435, 0.0015;
-    /// the real D435 frames in `../shared/data` show about 0.001). The
+    /// the real D435 frames in `../shared/data` show about 0.001).
     /// With it, each kept neighbourhood's normal is refitted to its
     /// samples by least squares ([`refit`]), which a far wall's noise
     /// needs. The default, 0, is Biswas & Veloso's fixed ε and three-point
@@ -553,10 +552,6 @@ mod tests {
         // neighbourhood's samples, every one is within 10° (half within
         // 5°).
         let facing = aware.normals.iter().filter(|n| n[2] < -(10f32.to_radians().cos())).count();
-        for deg in [2.0f32, 5.0, 10.0, 20.0, 30.0] {
-            eprintln!("{deg}: {}", aware.normals.iter().filter(|n| n[2] < -(deg.to_radians().cos())).count());
-        }
-
         assert_eq!(facing, aware.normals.len(), "normals within 10° of the wall's");
     }
 }
