@@ -10,12 +10,11 @@
 //! a likelihood that prefers a wrong pose; points the truth cannot match
 //! at one distance are what the model gets wrong there.
 //!
-//! `cargo run --release --example truth_fit -- MAP SEED [SECONDS [NOISE_PER_Z2 [PEOPLE [OCCLUDERS]]]]`
+//! `cargo run --release --example truth_fit -- MAP SEED [SECONDS [NOISE_PER_Z2 [PEOPLE]]]`
 //!
 //! NOISE_PER_Z2 (default 0.0015, the simulated D435's) is the camera's
 //! noise law for FSPF's `noise_per_z2` and CGR's `noise_per_r2` both; 0
 //! gives the defaults' fixed ε. PEOPLE defaults to 5, as the simulator's.
-//! OCCLUDERS 1 sets CGR's `leave_out_occluders` (default 0).
 //!
 //! With `ALL_LINES=1` in the environment, each distance bin also says
 //! how many points match with every wall of the map as the scene, and
@@ -51,7 +50,6 @@ fn main() {
     let seconds: f64 = a.get(2).map_or(20.0, |s| s.parse().unwrap());
     let noise: f64 = a.get(3).map_or(0.0015, |s| s.parse().unwrap());
     let people: usize = a.get(4).map_or(5, |s| s.parse().unwrap());
-    let leave_out_occluders = a.get(5).is_some_and(|s| s == "1");
     let floor = floor_for(map, seed).unwrap();
     let world = Arc::new(floor.world.clone());
     let camera = DepthCamera::d435_on_robot();
@@ -60,7 +58,6 @@ fn main() {
         leave_out_corners: true,
         newton_step: true,
         noise_per_r2: noise,
-        leave_out_occluders,
         ..CgrOptions::default()
     };
     let grid = Arc::new(SceneGrid::build(&world, 0.2, cgr.range, 2).unwrap());

@@ -79,9 +79,6 @@ struct CgrParams {
     /// The largest obstacle the map leaves out, metres (with
     /// `occlusion_fits`).
     occluder_size: Real,
-    /// Short points in runs no wider than `occluder_size` are left out of
-    /// the weights (depth, with `occlusion_fits`).
-    leave_out_occluders: bool,
     /// Points at corners facing the other wall are left out (depth).
     leave_out_corners: bool,
     /// Refinement ends with a whole-curvature Newton step (depth).
@@ -133,7 +130,6 @@ impl Default for CgrParams {
             outlier_sigmas: c.outlier_sigmas,
             occlusion_fits: c.occlusion_fits,
             occluder_size: c.occluder_size,
-            leave_out_occluders: c.leave_out_occluders,
             leave_out_corners: c.leave_out_corners,
             newton_step: c.newton_step,
             injection: o.injection.is_some(),
@@ -201,7 +197,6 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
         outlier_sigmas: p.outlier_sigmas,
         occlusion_fits: p.occlusion_fits,
         occluder_size: p.occluder_size,
-        leave_out_occluders: p.leave_out_occluders,
         leave_out_corners: p.leave_out_corners,
         newton_step: p.newton_step,
     };

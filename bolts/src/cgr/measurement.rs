@@ -62,15 +62,6 @@ pub struct CgrOptions {
     /// in the test for a lost robot ([`Evaluation::widest_short_run`]).
     /// The default is 1.
     pub occluder_size: Real,
-    /// With `occlusion_fits`, leave out of the likelihood (rather than
-    /// count as outliers) the points short of the map in each run of
-    /// bearing no wider than `occluder_size`: a person or a box in free
-    /// space, which any pose would see so. Counted as outliers, they let a
-    /// pose turned to match some of them to a wall outscore the true one
-    /// (decision 0026). Runs wider than that stay outliers: another
-    /// place's walls. The test for a lost robot is unchanged. The default
-    /// is false.
-    pub leave_out_occluders: bool,
     /// Leave out, rather than count as outliers, the points whose normal
     /// disagrees with the wall their ray meets but agrees with a wall
     /// within the outlier cap of them (a corner, a jamb): see
@@ -99,7 +90,6 @@ impl Default for CgrOptions {
             outlier_sigmas: 3.0,
             occlusion_fits: false,
             occluder_size: 1.0,
-            leave_out_occluders: false,
             leave_out_corners: false,
             newton_step: false,
         }
@@ -167,12 +157,6 @@ pub struct Evaluation {
     /// [`CgrOptions::occlusion_fits`], which alone reads them): each run of sectors with short points is
     /// something in the way, as wide as the run's arcs.
     pub short_ranges: [f32; SHORT_BINS],
-    /// Short points in each sector of [`Self::short_ranges`] (gathered
-    /// with it).
-    pub short_counts: [u16; SHORT_BINS],
-    /// Short points left out of `log_likelihood` as occluders
-    /// ([`CgrOptions::leave_out_occluders`]).
-    pub occluded: usize,
 }
 
 /// Sectors of bearing over the full turn in which short points are
@@ -189,8 +173,6 @@ impl Default for Evaluation {
             matched: 0,
             short: 0,
             short_ranges: [f32::INFINITY; SHORT_BINS],
-            short_counts: [0; SHORT_BINS],
-            occluded: 0,
         }
     }
 }
@@ -208,7 +190,6 @@ impl Evaluation {
         let bin = ((turn * SHORT_BINS as Real) as usize).min(SHORT_BINS - 1);
         let r = &mut self.short_ranges[bin];
         *r = r.min(dx.hypot(dy) as f32);
-        self.short_counts[bin] = self.short_counts[bin].saturating_add(1);
     }
 
     /// How wide the widest thing in the way is, metres: over each run of
@@ -217,46 +198,24 @@ impl Evaluation {
     /// points. A person or a box fills a few sectors close up or one far
     /// off; the walls of another place fill the view at metres.
     pub fn widest_short_run(&self) -> Real {
-        let mut widest: Real = 0.0;
-        self.for_each_short_run(|width, _| widest = widest.max(width));
-        widest
-    }
-
-    /// The short points in runs no wider than `size` metres: things in
-    /// the way that something of that size explains.
-    pub fn short_in_runs_up_to(&self, size: Real) -> usize {
-        let mut count = 0;
-        self.for_each_short_run(|width, points| count += if width <= size { points } else { 0 });
-        count
-    }
-
-    /// Calls `visit(width, points)` for each run of adjacent sectors
-    /// holding short points (wrapping round): its width, the sum of its
-    /// sectors' arcs at their nearest short point, and its points.
-    fn for_each_short_run(&self, mut visit: impl FnMut(Real, usize)) {
         let sector = std::f64::consts::TAU / SHORT_BINS as Real;
         let arc = |k: usize| Real::from(self.short_ranges[k % SHORT_BINS]) * sector;
         let held = |k: usize| self.short_ranges[k % SHORT_BINS].is_finite();
-        let points = |k: usize| usize::from(self.short_counts[k % SHORT_BINS]);
         // Start after an empty sector, so that a run across the wrap is
         // measured whole; a full circle of short points is one run.
         let Some(start) = (0..SHORT_BINS).find(|&k| !held(k)) else {
-            visit((0..SHORT_BINS).map(arc).sum(), (0..SHORT_BINS).map(points).sum());
-            return;
+            return (0..SHORT_BINS).map(arc).sum();
         };
-        let (mut width, mut count): (Real, usize) = (0.0, 0);
+        let (mut widest, mut run): (Real, Real) = (0.0, 0.0);
         for k in start + 1..=start + SHORT_BINS {
             if held(k) {
-                width += arc(k);
-                count += points(k);
-            } else if count > 0 || width > 0.0 {
-                visit(width, count);
-                (width, count) = (0.0, 0);
+                run += arc(k);
+                widest = widest.max(run);
+            } else {
+                run = 0.0;
             }
         }
-        if count > 0 || width > 0.0 {
-            visit(width, count);
-        }
+        widest
     }
 }
 
@@ -339,10 +298,6 @@ pub fn evaluate(
             e.cross[2] += dd[1] * dd[2] * per_variance;
         }
         e.matched += 1;
-    }
-    if o.occlusion_fits && o.leave_out_occluders {
-        e.occluded = e.short_in_runs_up_to(o.occluder_size);
-        e.log_likelihood -= e.occluded as Real * outlier;
     }
     e
 }
@@ -595,15 +550,10 @@ mod tests {
         along(&mut e, -30.0, 1.0, 0.4);
         let w = e.widest_short_run();
         assert!((0.4..=0.8).contains(&w), "{w}");
-        assert_eq!(e.short_in_runs_up_to(1.0), 42, "both things' points");
         // A wall 4 m across at 3 m: another place's.
         along(&mut e, 0.0, 3.0, 4.0);
         let w = e.widest_short_run();
         assert!(w > 3.0, "{w}");
-        // Spanning ±34°, it joins both things into one run: no point of it
-        // is an obstacle's any more, unless obstacles may be 5 m wide.
-        assert_eq!(e.short_in_runs_up_to(1.0), 0);
-        assert_eq!(e.short_in_runs_up_to(5.0), 63);
         // Behind the sensor, across the bearing where sectors wrap round:
         // one thing, measured whole.
         let mut behind = Evaluation::default();

