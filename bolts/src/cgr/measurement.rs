@@ -278,7 +278,8 @@ pub fn evaluate(
         if (lx * wx + ly * wy).abs() < min_cos {
             // At a corner the point tells nothing either way; elsewhere it
             // faces the wrong way for this pose.
-            if !(o.leave_out_corners && at_corner(map, lines, q, (wx, wy), min_cos, cap)) {
+            let blended = o.noise_per_r2 > 0.0 && near_an_end(w, q, BLEND_REACH);
+            if !(o.leave_out_corners && (blended || at_corner(map, lines, q, (wx, wy), min_cos, cap))) {
                 e.log_likelihood += outlier;
             }
             continue;
@@ -300,6 +301,23 @@ pub fn evaluate(
         e.matched += 1;
     }
     e
+}
+
+/// With a range-dependent noise (`noise_per_r2`, for the far points that
+/// FSPF's `noise_per_z2` keeps), how near the end of the wall its ray
+/// meets a point whose normal disagrees is left out with
+/// `leave_out_corners`, metres. An FSPF neighbourhood is 0.5 m across
+/// (`plane_size`): within half of that of a corner or a door's jamb it
+/// may span both faces, and at the tolerance far walls need (16 cm at
+/// 6 m) it passes as one plane whose normal is a blend of the two, which
+/// no wall of the map has. Counted as outliers, such points cost the true
+/// pose (CVAP6 seed 4: 121 points of a jamb 6–8 m away, −107 in one
+/// frame; decision 0026).
+const BLEND_REACH: Real = 0.25;
+
+/// Whether `q` lies within `reach` of either end of `w`.
+fn near_an_end(w: &squall_core::linemap::Segment, q: (Real, Real), reach: Real) -> bool {
+    [w.a, w.b].iter().any(|end| (q.0 - end.0).hypot(q.1 - end.1) <= reach)
 }
 
 /// A wall's unit normal (its direction turned left).
@@ -751,6 +769,32 @@ mod tests {
         // Mid-wall, the same normal has no wall near to agree with.
         let mid = one([5.0, -1.5], [0.0, 1.0], &o);
         assert_eq!((mid.matched, mid.log_likelihood), (0, o.outlier_log_likelihood()), "{mid:?}");
+    }
+
+    #[test]
+    fn a_far_patchs_blended_normal_near_a_wall_end_is_left_out_only_with_the_noise_law() {
+        // A wall along y = 0 from x = 0 to 4, seen from (2, 3): a point on
+        // it 0.1 m from its end, and one at its middle, both with a normal
+        // 45° off the wall's (a patch across a jamb, or a wrong pose).
+        let wall = LineMap::parse("wall", "0,0,4,0\n").unwrap();
+        let pose = Pose2::new(2.0, 3.0, 0.0);
+        let tilted = [std::f32::consts::FRAC_1_SQRT_2, std::f32::consts::FRAC_1_SQRT_2];
+        let seen = |x: f32| Observation2d {
+            points: vec![[x - 2.0, -3.0]],
+            normals: vec![tilted],
+            ..Observation2d::default()
+        };
+        let depth = CgrOptions { leave_out_corners: true, noise_per_r2: 0.0015, ..CgrOptions::default() };
+        let outlier = depth.outlier_log_likelihood();
+        let ll = |x: f32, o: &CgrOptions| evaluate(&wall, &[0], &pose, &seen(x), o).log_likelihood;
+        assert_eq!(ll(0.1, &depth), 0.0, "near the end: left out");
+        assert!((ll(2.0, &depth) - outlier).abs() < 1e-12, "mid-wall: an outlier");
+        // Without the noise law (no far patches) or without leaving out
+        // corners, it is an outlier wherever it lies.
+        let fixed = CgrOptions { noise_per_r2: 0.0, ..depth.clone() };
+        assert!((ll(0.1, &fixed) - outlier).abs() < 1e-12);
+        let counted = CgrOptions { leave_out_corners: false, ..depth };
+        assert!((ll(0.1, &counted) - outlier).abs() < 1e-12);
     }
 
     #[test]
