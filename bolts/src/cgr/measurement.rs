@@ -27,9 +27,11 @@ pub struct CgrOptions {
     /// of a stereo depth camera (D435: σ(z) ≈ 0.0015 z² simulated, 0.001
     /// on real frames, 7 cm at 7 m) count as what they are, neither
     /// outliers nor as sure as near ones; the outlier cap scales with it.
-    /// For use with FSPF's `noise_per_z2`, which keeps such points; not
-    /// yet the depth path's default (decision 0025). 0 for a laser, whose
-    /// error hardly grows within its range. The default is 0.
+    /// For use with FSPF's `noise_per_z2`, which keeps such points; with
+    /// `leave_out_corners`, points at a wall's end whose normal disagrees
+    /// are then left out (within 0.25 m, `BLEND_REACH`). Not yet the depth path's
+    /// default (decisions 0025, 0026). 0 for a laser, whose error hardly
+    /// grows within its range. The default is 0.
     pub noise_per_r2: Real,
     /// f: correlation between points (each counts 1/f). The default is 5.
     pub correlation: Real,
