@@ -3,6 +3,9 @@
 //!
 //! Pixel values follow `map_saver`: occupied (≥ 65 %) black 0, free
 //! (≤ 25 %) white 254, unknown grey 205. Image row 0 is the top of the map.
+//! The YAML's thresholds are the ones ROS 1 `map_saver` and slam_toolbox
+//! write (free 0.196, occupied 0.65, trinary), under which nav2's
+//! `map_server` reads those three greys back as free, occupied and unknown.
 
 use std::io::Write;
 use std::path::Path;
@@ -17,6 +20,15 @@ use crate::{Error, Result};
 pub const OCCUPIED_PERCENT: i8 = 65;
 /// Occupancy (percent) at or below which a cell is drawn free.
 pub const FREE_PERCENT: i8 = 25;
+
+/// `free_thresh` of the YAML. `map_server` reads a pixel of grey `g` as
+/// occupancy `1 − g/255` and calls it free below this: white 254 reads
+/// 0.004 (free), the unknown grey 205 reads 0.19608, just above, so it
+/// stays unknown. With 0.25 (the drawing threshold) every unknown cell
+/// would load as free and a planner would route through unmapped space.
+pub const YAML_FREE_THRESH: f64 = 0.196;
+/// `occupied_thresh` of the YAML: black 0 reads 1.0, above it.
+pub const YAML_OCCUPIED_THRESH: f64 = 0.65;
 
 fn pixel(value: i8) -> u8 {
     match value {
@@ -64,11 +76,7 @@ pub fn write_pgm_yaml(grid: &OccupancyGrid, dir: &Path, stem: &str) -> Result<()
     .map_err(|source| Error::Write { path: path.clone(), source })?;
     let yaml = format!(
         "image: {stem}.pgm\nmode: trinary\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: {}\nfree_thresh: {}\n",
-        grid.resolution,
-        grid.origin.0,
-        grid.origin.1,
-        f64::from(OCCUPIED_PERCENT) / 100.0,
-        f64::from(FREE_PERCENT) / 100.0,
+        grid.resolution, grid.origin.0, grid.origin.1, YAML_OCCUPIED_THRESH, YAML_FREE_THRESH,
     );
     let path = dir.join(format!("{stem}.yaml"));
     write_atomic(&path, yaml.as_bytes()).map_err(|source| Error::Write { path, source })

@@ -11,7 +11,9 @@ use squall_core::camera::DepthFrame;
 use squall_core::depth_render::{Clutter, DepthCamera, Props};
 use squall_core::linemap::LineMap;
 use squall_core::sensor::PoseStamped;
-use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+use squall_topology::{
+    BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
+};
 
 use crate::sim::office::Floor;
 use crate::sim::people::Crowd;
@@ -94,6 +96,8 @@ pub struct DepthSimSpout {
     seed: u64,
     camera: DepthCamera,
     sim: Option<World>,
+    /// Frames emitted, for the progress display.
+    readings: ReadingCounter,
 }
 
 /// The running simulation: the robot's, the map, the boxes, the people
@@ -117,7 +121,13 @@ impl DepthSimSpout {
             return Err(ParamError::new("duration_secs and frame_hz must be > 0"));
         }
         let seed = params.seed.unwrap_or(p.seed());
-        Ok(DepthSimSpout { p: params, seed, camera: DepthCamera::d435_on_robot(), sim: None })
+        Ok(DepthSimSpout {
+            p: params,
+            seed,
+            camera: DepthCamera::d435_on_robot(),
+            sim: None,
+            readings: ReadingCounter::default(),
+        })
     }
 }
 
@@ -141,7 +151,9 @@ impl Spout for DepthSimSpout {
             ..SimConfig::default()
         };
         config.check()?;
-        ctx.expect_emits(2 * (self.p.duration_secs * self.p.frame_hz) as u64);
+        let frames = (self.p.duration_secs * self.p.frame_hz) as u64;
+        ctx.expect_emits(2 * frames);
+        self.readings = ctx.readings("frames", Some(frames));
         let crowd = Crowd::new(&floor, self.p.people, self.seed)?;
         self.sim = Some(World {
             sim: Simulation::new(floor, config)?,
@@ -169,6 +181,7 @@ impl Spout for DepthSimSpout {
                     out.emit("frame", DepthFrame { stamp: scan.stamp, odometry: scan.odometry, image })
                         .await?;
                     out.emit("truth", PoseStamped { stamp: scan.stamp, pose: truth }).await?;
+                    self.readings.add(1);
                     return Ok(SpoutStatus::Continue);
                 }
             }

@@ -16,7 +16,7 @@ use squall_topology::Registry;
 
 /// Registers every source kind (`sim`, `carmen`, `rosbag2`,
 /// `depth_sim`; with the `cluster` feature the live link, `live.ingest` and
-/// `live.publish`).
+/// `live.publish`; without it those two are recorded as compiled out).
 pub fn register(r: &mut Registry) {
     r.register_spout("sim", sim::SimSpout::from_params);
     r.register_spout("carmen", carmen::CarmenSpout::from_params);
@@ -26,5 +26,10 @@ pub fn register(r: &mut Registry) {
     {
         r.register_spout("live.ingest", live::LiveIngest::from_params);
         r.register_bolt("live.publish", live::LivePublish::from_params);
+    }
+    #[cfg(not(feature = "cluster"))]
+    {
+        r.compiled_out("live.ingest", "cluster");
+        r.compiled_out("live.publish", "cluster");
     }
 }

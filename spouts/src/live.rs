@@ -20,7 +20,8 @@ use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::cluster::config::{TlsSpec, mismatched_endpoint};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
 use squall_topology::{
-    Bolt, BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext, Tuple,
+    Bolt, BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
+    Tuple,
 };
 
 use crate::rosbag2::messages;
@@ -137,6 +138,9 @@ pub struct LiveIngest {
     subscribers: Option<(Subscriber, Option<Subscriber>)>,
     /// Odometry received, oldest first (about the last 10 s).
     odometry: Vec<Odometry>,
+    /// Scans emitted, for the progress display (no total: the robot
+    /// decides when it ends).
+    readings: ReadingCounter,
 }
 
 impl LiveIngest {
@@ -159,6 +163,7 @@ impl LiveIngest {
             laser_offset: Pose2::new(x, y, theta),
             subscribers: None,
             odometry: Vec::new(),
+            readings: ReadingCounter::default(),
         })
     }
 
@@ -188,7 +193,8 @@ impl Spout for LiveIngest {
         d.output::<LaserReading>("scan");
     }
 
-    async fn open(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {
+    async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
+        self.readings = ctx.readings("scans", None);
         let session = shared(&self.options).await?;
         let scans = session.declare_subscriber(self.keys.0.clone()).await?;
         let odometry = match self.format {
@@ -247,6 +253,7 @@ impl Spout for LiveIngest {
                     match reading {
                         Some(r) if r.ranges.len() >= 2 => {
                             out.emit("scan", r).await?;
+                            self.readings.add(1);
                             return Ok(SpoutStatus::Continue);
                         }
                         _ => out.count("malformed", 1),

@@ -6,7 +6,7 @@ use common::shared;
 
 use std::io::Write;
 
-use squall_spouts::carmen::{Laser, LineParser, LogError, ReadOptions, Record, read_log};
+use squall_spouts::carmen::{Laser, LineParser, LogError, ReadOptions, Record, count_front_scans, read_log};
 
 fn front_scans(records: &[Record]) -> usize {
     records.iter().filter(|r| matches!(r, Record::Scan(Laser::Front, _))).count()
@@ -21,6 +21,8 @@ fn every_real_log_parses_completely() {
     ] {
         let records = read_log(&shared(file), ReadOptions::default()).unwrap();
         assert_eq!(front_scans(&records), scans, "{file}");
+        // The progress display's quick count agrees with the parse.
+        assert_eq!(count_front_scans(&shared(file)).unwrap(), scans as u64, "{file}");
         let Some(Record::Scan(_, first)) = records.iter().find(|r| matches!(r, Record::Scan(..))) else {
             panic!("{file}: no scan")
         };
@@ -44,6 +46,7 @@ fn gzip_reads_the_same_and_truncation_is_an_error() {
     let a = read_log(&plain, ReadOptions::default()).unwrap();
     let b = read_log(&gz, ReadOptions::default()).unwrap();
     assert_eq!(a, b);
+    assert_eq!(count_front_scans(&gz).unwrap(), front_scans(&a) as u64);
 
     let cut = dir.path().join("cut.clf.gz");
     std::fs::write(&cut, &compressed[..compressed.len() / 2]).unwrap();

@@ -37,23 +37,21 @@ impl ProgressDisplay {
         let thread = std::thread::spawn(move || {
             let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr_with_hz(10));
             let with_total = ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:40} {human_pos}/{human_len} tuples from spouts ({msg}, eta {eta})",
+                "{spinner} [{elapsed_precise}] {bar:40} {human_pos}/{human_len} {msg} {percent}%, eta {eta}",
             )
             .expect("valid template");
-            let open_ended = ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {pos} tuples from spouts ({per_sec})",
-            )
-            .expect("valid template");
+            let open_ended = ProgressStyle::with_template("{spinner} [{elapsed_precise}] {human_pos} {msg}")
+                .expect("valid template");
             bar.set_style(open_ended.clone());
             while !flag.load(Ordering::Relaxed) {
-                let expected = progress.expected.load(Ordering::Relaxed);
-                if expected > 0 && bar.length() != Some(expected) {
-                    bar.set_length(expected);
+                let count = Count::of(&progress);
+                if count.total > 0 && bar.length() != Some(count.total) {
+                    bar.set_length(count.total);
                     bar.set_style(with_total.clone());
                 }
-                let emitted = progress.emitted.load(Ordering::Relaxed);
-                bar.set_position(emitted);
-                bar.set_message(rate(emitted, bar.elapsed()));
+                bar.set_position(count.done);
+                let separator = if count.total > 0 { "," } else { "" };
+                bar.set_message(format!("{} ({}){separator}", count.unit, rate(count.done, bar.elapsed())));
                 std::thread::sleep(Duration::from_millis(100));
             }
             bar.finish_and_clear();
@@ -70,8 +68,32 @@ impl ProgressDisplay {
     }
 }
 
-/// Logs the counters every [`LOG_PERIOD`] until `stop`, as
-/// `N tuples from spouts` (with ` of TOTAL` once the spouts said).
+/// What the display counts: the spouts' readings once one has said it
+/// emits them (scans, frames), else every tuple from spouts.
+struct Count {
+    done: u64,
+    total: u64,
+    unit: String,
+}
+
+impl Count {
+    fn of(progress: &Progress) -> Count {
+        match progress.reading_unit.get() {
+            Some(unit) => Count {
+                done: progress.readings.load(Ordering::Relaxed),
+                total: progress.expected_readings.load(Ordering::Relaxed),
+                unit: unit.clone(),
+            },
+            None => Count {
+                done: progress.emitted.load(Ordering::Relaxed),
+                total: progress.expected.load(Ordering::Relaxed),
+                unit: "tuples from spouts".to_string(),
+            },
+        }
+    }
+}
+
+/// Logs the counts every [`LOG_PERIOD`] until `stop` (see [`log_line`]).
 fn log_progress(progress: &Progress, stop: &AtomicBool) {
     let mut last = Instant::now();
     while !stop.load(Ordering::Relaxed) {
@@ -80,11 +102,24 @@ fn log_progress(progress: &Progress, stop: &AtomicBool) {
             continue;
         }
         last = Instant::now();
-        let emitted = progress.emitted.load(Ordering::Relaxed);
-        match progress.expected.load(Ordering::Relaxed) {
-            0 => tracing::info!("{emitted} tuples from spouts"),
-            expected => tracing::info!("{emitted} tuples from spouts of {expected}"),
-        }
+        tracing::info!("{}", log_line(progress));
+    }
+}
+
+/// `120 scans of 1200 (10%); 361 tuples from spouts`: the readings, when a
+/// spout counts them, then every tuple from spouts (with ` of TOTAL` once
+/// the spouts said), which a supervisor can follow in any run.
+fn log_line(progress: &Progress) -> String {
+    let emitted = progress.emitted.load(Ordering::Relaxed);
+    let tuples = match progress.expected.load(Ordering::Relaxed) {
+        0 => format!("{emitted} tuples from spouts"),
+        expected => format!("{emitted} tuples from spouts of {expected}"),
+    };
+    let Some(unit) = progress.reading_unit.get() else { return tuples };
+    let done = progress.readings.load(Ordering::Relaxed);
+    match progress.expected_readings.load(Ordering::Relaxed) {
+        0 => format!("{done} {unit}; {tuples}"),
+        total => format!("{done} {unit} of {total} ({:.0}%); {tuples}", 100.0 * done as f64 / total as f64),
     }
 }
 
@@ -95,7 +130,40 @@ fn rate(count: u64, elapsed: Duration) -> String {
         format!("{:.2} M/s", per_sec / 1e6)
     } else if per_sec >= 1e3 {
         format!("{:.1} k/s", per_sec / 1e3)
-    } else {
+    } else if per_sec >= 10.0 {
         format!("{per_sec:.0}/s")
+    } else {
+        format!("{per_sec:.1}/s")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates_keep_three_significant_figures_at_most() {
+        let second = Duration::from_secs(1);
+        assert_eq!(rate(2_560_000, second), "2.56 M/s");
+        assert_eq!(rate(41_234, second), "41.2 k/s");
+        assert_eq!(rate(412, second), "412/s");
+        assert_eq!(rate(41, second), "41/s");
+        assert_eq!(rate(25, Duration::from_secs(10)), "2.5/s");
+    }
+
+    #[test]
+    fn readings_are_counted_once_a_spout_names_them() {
+        let progress = Progress::default();
+        progress.emitted.store(30, Ordering::Relaxed);
+        progress.expected.store(300, Ordering::Relaxed);
+        let tuples = Count::of(&progress);
+        assert_eq!((tuples.done, tuples.total, tuples.unit.as_str()), (30, 300, "tuples from spouts"));
+        assert_eq!(log_line(&progress), "30 tuples from spouts of 300");
+        progress.reading_unit.set("scans".to_string()).unwrap();
+        progress.readings.store(10, Ordering::Relaxed);
+        progress.expected_readings.store(100, Ordering::Relaxed);
+        let scans = Count::of(&progress);
+        assert_eq!((scans.done, scans.total, scans.unit.as_str()), (10, 100, "scans"));
+        assert_eq!(log_line(&progress), "10 scans of 100 (10%); 30 tuples from spouts of 300");
     }
 }

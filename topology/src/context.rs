@@ -73,4 +73,34 @@ impl TaskContext {
             p.expected.fetch_add(total, Ordering::Relaxed);
         }
     }
+
+    /// Tells the progress display that this spout's task emits sensor
+    /// readings, each one a `unit` ("scans", "frames"), `total` of them in
+    /// all when known; count each with the counter returned. The display
+    /// then shows readings, a percentage and an ETA rather than tuples
+    /// (which count odometry and side streams too). The first unit given
+    /// in a run names them all.
+    pub fn readings(&self, unit: &str, total: Option<u64>) -> ReadingCounter {
+        if let Some(p) = &self.progress {
+            let _ = p.reading_unit.set(unit.to_string());
+            p.expected_readings.fetch_add(total.unwrap_or(0), Ordering::Relaxed);
+        }
+        ReadingCounter { progress: self.progress.clone() }
+    }
+}
+
+/// Counts a spout's readings for the progress display (from
+/// [`TaskContext::readings`]); does nothing when no display watches.
+#[derive(Debug, Clone, Default)]
+pub struct ReadingCounter {
+    progress: Option<Arc<Progress>>,
+}
+
+impl ReadingCounter {
+    /// Counts `n` more readings emitted.
+    pub fn add(&self, n: u64) {
+        if let Some(p) = &self.progress {
+            p.readings.fetch_add(n, Ordering::Relaxed);
+        }
+    }
 }

@@ -31,7 +31,7 @@ pub fn to_dot(topology: &Topology) -> String {
             let ty = topology
                 .declared(&input.from)
                 .and_then(|d| d.stream(&input.stream))
-                .map_or("?", |s| short_type(s.message.name()));
+                .map_or_else(|| "?".to_string(), |s| short_type(s.message.name()));
             let style = if input.feedback { ", style=dashed" } else { "" };
             let _ = writeln!(
                 dot,
@@ -39,7 +39,7 @@ pub fn to_dot(topology: &Topology) -> String {
                 q(&input.from),
                 q(&c.spec.name),
                 q(&input.stream),
-                q(ty),
+                q(&ty),
                 q(&input.grouping.to_string())
             );
         }
@@ -49,7 +49,7 @@ pub fn to_dot(topology: &Topology) -> String {
                 "  \"{}\" -> \"{}\" [label=\"peer: {}\", style=dotted];",
                 q(&c.spec.name),
                 q(&c.spec.name),
-                q(short_type(peer.name()))
+                q(&short_type(peer.name()))
             );
         }
     }
@@ -57,11 +57,42 @@ pub fn to_dot(topology: &Topology) -> String {
     dot
 }
 
-/// `a::b::Type<c::D>` → `Type<D>`.
-fn short_type(name: &'static str) -> &'static str {
-    let generic = name.find('<').unwrap_or(name.len());
-    match name[..generic].rfind("::") {
-        Some(i) => &name[i + 2..],
-        None => name,
+/// `a::b::Type<c::D, e::F>` → `Type<D, F>`: every path in a type name
+/// shortened to its last segment, generic arguments included.
+fn short_type(name: &str) -> String {
+    let mut out = String::with_capacity(name.len());
+    let mut segment_start = 0;
+    for (i, c) in name.char_indices() {
+        if c.is_alphanumeric() || c == '_' || c == ':' {
+            continue;
+        }
+        out.push_str(last_segment(&name[segment_start..i]));
+        out.push(c);
+        segment_start = i + c.len_utf8();
+    }
+    out.push_str(last_segment(&name[segment_start..]));
+    out
+}
+
+/// `a::b::Type` → `Type`.
+fn last_segment(path: &str) -> &str {
+    path.rfind("::").map_or(path, |i| &path[i + 2..])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::short_type;
+
+    #[test]
+    fn type_names_lose_their_paths_generics_included() {
+        assert_eq!(short_type("u64"), "u64");
+        assert_eq!(short_type("squall_core::sensor::LaserReading"), "LaserReading");
+        assert_eq!(
+            short_type(
+                "squall_bolts::slam::Transfer<squall_bolts::slam::model::SlamParticle, alloc::vec::Vec<u8>>"
+            ),
+            "Transfer<SlamParticle, Vec<u8>>"
+        );
+        assert_eq!(short_type("(alloc::string::String, [f64; 3], &str)"), "(String, [f64; 3], &str)");
     }
 }

@@ -37,7 +37,7 @@ pub mod testing;
 mod tuple;
 
 pub use component::{Bolt, MessageId, Spout, SpoutStatus};
-pub use context::TaskContext;
+pub use context::{ReadingCounter, TaskContext};
 pub use declare::{Accepts, DEFAULT_STREAM, Declarer, StreamDecl};
 pub use error::{BoxError, CodecError, EmitError, Error, ParamError, Result};
 pub use field_hash::FieldHashError;

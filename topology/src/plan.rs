@@ -160,11 +160,15 @@ fn instantiate(
             Role::Spout => registry.spout_kinds().collect(),
             Role::Bolt => registry.bolt_kinds().collect(),
         };
-        errors.push(spec.source.error_at_line(
-            c.line,
-            at,
-            format!("unknown {} kind \"{}\" (known: {})", c.role, c.kind, known.join(", ")),
-        ));
+        let message = match registry.feature_for(&c.kind) {
+            Some(feature) => format!(
+                "{} kind \"{}\" is not in this build: rebuild squall with `--features {feature}` \
+                 (e.g. `cargo install --path . --features {feature}`)",
+                c.role, c.kind
+            ),
+            None => format!("unknown {} kind \"{}\" (known: {})", c.role, c.kind, known.join(", ")),
+        };
+        errors.push(spec.source.error_at_line(c.line, at, message));
         return None;
     };
     let built = match &factory {

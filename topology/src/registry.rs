@@ -27,6 +27,9 @@ pub struct Registry {
     /// Bolt kinds with variants, by kind (see
     /// [`Registry::register_bolt_variant`]).
     families: BTreeMap<String, Family>,
+    /// Kinds this build leaves out, with the Cargo feature that brings
+    /// them (see [`Registry::compiled_out`]).
+    missing: BTreeMap<String, String>,
 }
 
 /// The variants of one bolt kind, chosen by a string parameter, in the
@@ -139,6 +142,19 @@ impl Registry {
         self.bolts.keys().map(String::as_str)
     }
 
+    /// Records that `kind` exists but is compiled out of this build, and
+    /// which Cargo feature brings it, so that a topology naming it is told
+    /// to rebuild with the feature rather than that the kind is unknown.
+    pub fn compiled_out(&mut self, kind: &str, feature: &str) -> &mut Self {
+        self.missing.insert(kind.to_string(), feature.to_string());
+        self
+    }
+
+    /// The Cargo feature that brings `kind`, if this build leaves it out.
+    pub fn feature_for(&self, kind: &str) -> Option<&str> {
+        self.missing.get(kind).map(String::as_str)
+    }
+
     pub(crate) fn spout(&self, kind: &str) -> Option<&SpoutFactory> {
         self.spouts.get(kind)
     }
@@ -209,5 +225,27 @@ mod tests {
         // A plain registration replaces the family.
         r.register_bolt("family", |_| Ok(Named("plain")));
         assert_eq!(build(&r, "").unwrap(), ["plain"]);
+    }
+
+    #[test]
+    fn a_kind_compiled_out_is_named_with_the_feature_that_brings_it() {
+        let text = "[topology]\nname = \"t\"\n\n[[spout]]\nname = \"source\"\nkind = \"live.ingest\"\n";
+        let mut r = Registry::new();
+        let unknown = crate::Topology::from_text("t.toml", text, &[], &r).unwrap_err().to_string();
+        assert!(
+            unknown.contains("t.toml:4") && unknown.contains("unknown spout kind \"live.ingest\""),
+            "{unknown}"
+        );
+        r.compiled_out("live.ingest", "cluster");
+        assert_eq!(r.feature_for("live.ingest"), Some("cluster"));
+        let missing = crate::Topology::from_text("t.toml", text, &[], &r).unwrap_err().to_string();
+        assert!(missing.contains("t.toml:4"), "{missing}");
+        assert!(
+            missing.contains(
+                "spout kind \"live.ingest\" is not in this build: rebuild squall with `--features cluster`"
+            ),
+            "{missing}"
+        );
+        assert!(!missing.contains("unknown"), "{missing}");
     }
 }

@@ -11,10 +11,12 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry};
-use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+use squall_topology::{
+    BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
+};
 
 pub use parse::{Laser, LineParser, Record, RecordError};
-pub use reader::{LogError, LogReader, ReadOptions, read_front_scans, read_log};
+pub use reader::{LogError, LogReader, ReadOptions, count_front_scans, read_front_scans, read_log};
 
 pub use crate::pace::Pace;
 use crate::pace::{Pacer, pace};
@@ -48,6 +50,8 @@ pub struct CarmenSpout {
     max_scans: Option<u64>,
     reader: Option<LogReader>,
     scans: u64,
+    /// Front scans emitted, for the progress display.
+    readings: ReadingCounter,
 }
 
 impl CarmenSpout {
@@ -65,6 +69,7 @@ impl CarmenSpout {
             max_scans: params.max_scans,
             reader: None,
             scans: 0,
+            readings: ReadingCounter::default(),
         })
     }
 
@@ -88,6 +93,10 @@ impl Spout for CarmenSpout {
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
         self.pacer.watch(ctx.stop());
         self.reader = Some(LogReader::open(&self.log, self.options)?);
+        // One quick pass for the count, so that the display can show a
+        // percentage and an ETA (a log is read far faster than matched).
+        let front = count_front_scans(&self.log)?;
+        self.readings = ctx.readings("scans", Some(self.max_scans.map_or(front, |m| m.min(front))));
         Ok(())
     }
 
@@ -113,6 +122,7 @@ impl Spout for CarmenSpout {
                 let stream = match laser {
                     Laser::Front => {
                         self.scans += 1;
+                        self.readings.add(1);
                         "scan"
                     }
                     Laser::Rear => "rear_scan",

@@ -62,6 +62,42 @@ impl Default for ReadOptions {
     }
 }
 
+/// The log's bytes, plain or gunzipped (gzip is recognised by its magic
+/// bytes, not the name).
+fn open_input(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
+    let open_err = |source| LogError::Open { path: path.to_path_buf(), source };
+    let mut file = BufReader::with_capacity(1 << 16, File::open(path).map_err(open_err)?);
+    let gzip = file.fill_buf().map_err(open_err)?.starts_with(&[0x1f, 0x8b]);
+    Ok(if gzip {
+        Box::new(BufReader::with_capacity(1 << 16, MultiGzDecoder::new(file)))
+    } else {
+        Box::new(file)
+    })
+}
+
+/// How many front-laser records (`FLASER`, `ROBOTLASER1`) the log holds,
+/// by their keyword alone: one pass that parses nothing, for a progress
+/// display's total. Malformed records are counted too (the reader decides
+/// about them).
+pub fn count_front_scans(path: &Path) -> Result<u64, LogError> {
+    let mut input = open_input(path)?;
+    let mut line = Vec::with_capacity(4096);
+    let (mut count, mut number) = (0, 0);
+    loop {
+        line.clear();
+        number += 1;
+        match input.read_until(b'\n', &mut line) {
+            Ok(0) => return Ok(count),
+            Ok(_) => {}
+            Err(source) => return Err(LogError::Read { path: path.to_path_buf(), line: number, source }),
+        }
+        let keyword = line.split(|b| b.is_ascii_whitespace()).find(|field| !field.is_empty());
+        if matches!(keyword, Some(b"FLASER" | b"ROBOTLASER1")) {
+            count += 1;
+        }
+    }
+}
+
 /// Yields the records of one log.
 pub struct LogReader {
     path: PathBuf,
@@ -83,17 +119,9 @@ impl std::fmt::Debug for LogReader {
 impl LogReader {
     /// Opens `path`; gzip is recognised by its magic bytes, not the name.
     pub fn open(path: &Path, options: ReadOptions) -> Result<Self, LogError> {
-        let open_err = |source| LogError::Open { path: path.to_path_buf(), source };
-        let mut file = BufReader::with_capacity(1 << 16, File::open(path).map_err(open_err)?);
-        let gzip = file.fill_buf().map_err(open_err)?.starts_with(&[0x1f, 0x8b]);
-        let input: Box<dyn BufRead + Send> = if gzip {
-            Box::new(BufReader::with_capacity(1 << 16, MultiGzDecoder::new(file)))
-        } else {
-            Box::new(file)
-        };
         Ok(LogReader {
             path: path.to_path_buf(),
-            input,
+            input: open_input(path)?,
             parser: LineParser::new(options.default_range_max),
             options,
             line: 0,

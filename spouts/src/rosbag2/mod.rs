@@ -14,7 +14,9 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry};
-use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+use squall_topology::{
+    BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
+};
 
 pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag, read_mcap_bytes};
 pub use cdr::CdrError;
@@ -63,6 +65,8 @@ pub struct Rosbag2Spout {
     odometry: VecDeque<Odometry>,
     without_odometry: u64,
     skipped: u64,
+    /// Scans emitted, for the progress display.
+    readings: ReadingCounter,
 }
 
 impl Rosbag2Spout {
@@ -83,6 +87,7 @@ impl Rosbag2Spout {
             odometry: VecDeque::new(),
             without_odometry: 0,
             skipped: 0,
+            readings: ReadingCounter::default(),
         })
     }
 }
@@ -113,6 +118,7 @@ impl Spout for Rosbag2Spout {
             self.odometry = readings.odometry.into();
         }
         ctx.expect_emits((scans.len() + self.odometry.len()) as u64);
+        self.readings = ctx.readings("scans", Some(scans.len() as u64));
         self.scans = scans.into();
         self.without_odometry = readings.scans_without_odometry;
         self.skipped = readings.skipped;
@@ -140,6 +146,7 @@ impl Spout for Rosbag2Spout {
         if scan_first {
             let scan = self.scans.pop_front().expect("checked above");
             out.emit("scan", scan).await?;
+            self.readings.add(1);
         } else {
             let odom = self.odometry.pop_front().expect("checked above");
             out.emit("odom", odom).await?;

@@ -4,7 +4,9 @@
 
 use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
-use squall_topology::{BoxError, Declarer, Emitter, ParamError, Params, Spout, SpoutStatus, TaskContext};
+use squall_topology::{
+    BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
+};
 
 use super::robot::{Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 use super::{DEFAULT_WORLD, laser_range_for, top_speed_for};
@@ -66,6 +68,8 @@ pub struct SimSpout {
     scans: u64,
     config: SimConfig,
     sim: Option<Simulation>,
+    /// Scans emitted, for the progress display.
+    readings: ReadingCounter,
 }
 
 impl SimSpout {
@@ -85,7 +89,14 @@ impl SimSpout {
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
-        Ok(SimSpout { world: params.world, max_scans: params.max_scans, scans: 0, config, sim: None })
+        Ok(SimSpout {
+            world: params.world,
+            max_scans: params.max_scans,
+            scans: 0,
+            config,
+            sim: None,
+            readings: ReadingCounter::default(),
+        })
     }
 }
 
@@ -96,7 +107,9 @@ impl Spout for SimSpout {
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
         let floor = super::floor_for(&self.world, self.config.seed)?;
-        ctx.expect_emits((self.config.duration_secs * self.config.scan_hz) as u64 * 3);
+        let scans = (self.config.duration_secs * self.config.scan_hz) as u64;
+        ctx.expect_emits(scans * 3);
+        self.readings = ctx.readings("scans", Some(self.max_scans.map_or(scans, |m| m.min(scans))));
         self.sim = Some(Simulation::new(floor, self.config.clone())?);
         Ok(())
     }
@@ -114,6 +127,7 @@ impl Spout for SimSpout {
             }
             Some(SimEvent::Scan(scan, truth)) => {
                 self.scans += 1;
+                self.readings.add(1);
                 let stamp = scan.stamp;
                 out.emit("scan", scan).await?;
                 out.emit("truth", PoseStamped { stamp, pose: truth }).await?;

@@ -2,8 +2,8 @@
 //! an abort waits, and the flag that ends a run early.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use tokio::sync::Notify;
@@ -15,6 +15,14 @@ pub struct Progress {
     pub emitted: AtomicU64,
     /// Tuples the spouts expect to emit in all (0 if unknown).
     pub expected: AtomicU64,
+    /// Sensor readings (scans, depth frames) the spouts have emitted: what
+    /// a user measures a run's progress in, odometry and other side
+    /// streams left out (see [`TaskContext::readings`](crate::TaskContext::readings)).
+    pub readings: AtomicU64,
+    /// Readings the spouts expect in all (0 if unknown).
+    pub expected_readings: AtomicU64,
+    /// What one reading is ("scans", "frames"), once a spout has said.
+    pub reading_unit: OnceLock<String>,
 }
 
 /// Options of a local run.
