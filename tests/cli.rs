@@ -718,9 +718,112 @@ fn slam_without_scans_fails_saying_why_instead_of_succeeding_empty() {
         dir.join("out").to_str().unwrap(),
     ]);
     let stderr = text(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    // Found in the bag's summary before the run: invalid input.
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("no messages on scan_topic \"/scna\"; the bag's topics: "), "{stderr}");
     assert!(stderr.contains("/scan (sensor_msgs/msg/LaserScan)"), "{stderr}");
+    assert!(!stderr.contains("component"), "no run started, so no component table: {stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `aces` converted to rosbag2's sqlite3 storage by an independent tool,
+/// the `rosbags` Python package (`.ci/run` installs it, pinned), into
+/// `dir/aces-db3`.
+fn aces_as_db3(dir: &Path) -> PathBuf {
+    let check = Command::new("rosbags-convert").arg("--help").output();
+    assert!(
+        check.as_ref().is_ok_and(|o| o.status.success()),
+        "this test needs rosbags-convert from the rosbags Python package (pip install rosbags==0.11.9)"
+    );
+    let db3 = dir.join("aces-db3");
+    let _ = std::fs::remove_dir_all(&db3);
+    let out = Command::new("rosbags-convert")
+        .args(["--src", &shared_data("rosbag2/aces"), "--dst"])
+        .arg(&db3)
+        .args(["--dst-storage", "sqlite3"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    db3
+}
+
+#[test]
+fn a_db3_bag_gives_byte_identical_slam_to_the_mcap_and_ros_1_bags_are_refused_before_the_run() {
+    let dir = out_dir("db3");
+    std::fs::create_dir_all(&dir).unwrap();
+    let db3 = aces_as_db3(&dir);
+    let yaml = std::fs::read_to_string(db3.join("metadata.yaml")).unwrap();
+    assert!(yaml.contains("storage_identifier: sqlite3"), "{yaml}");
+    let slam = |bag: &Path, out: &str| {
+        let out_dir = dir.join(out);
+        let run = squall(&[
+            "slam",
+            "--log",
+            bag.to_str().unwrap(),
+            "--max-scans",
+            "400",
+            "--particles",
+            "10",
+            "--out",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(run.status.success(), "{out}: {}", text(&run.stderr));
+        let read = |name: &str| std::fs::read(out_dir.join(name)).unwrap();
+        (read("trajectory.tum"), read("map.pgm"))
+    };
+    let from_mcap = slam(Path::new(&shared_data("rosbag2/aces")), "mcap");
+    let from_db3 = slam(&db3, "db3");
+    assert!(from_mcap.0.len() > 1000);
+    assert!(from_mcap == from_db3, "the sqlite3 bag's trajectory and map differ from the MCAP's");
+    // The .db3 file itself, without its folder, reads the same.
+    let file = std::fs::read_dir(&db3)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "db3"))
+        .unwrap();
+    assert!(slam(&file, "db3-file") == from_mcap);
+
+    // A ROS 1 bag, and a storage squall does not read, are refused before
+    // the run with what to do.
+    let ros1 = dir.join("old.bag");
+    std::fs::write(&ros1, b"#ROSBAG V2.0\nE\0\0\0").unwrap();
+    let unknown = dir.join("unknown");
+    std::fs::create_dir_all(&unknown).unwrap();
+    std::fs::write(
+        unknown.join("metadata.yaml"),
+        yaml.replace("storage_identifier: sqlite3", "storage_identifier: rosbag_v2"),
+    )
+    .unwrap();
+    for (bag, says) in [
+        (
+            ros1.as_path(),
+            "a ROS 1 bag; squall reads ROS 2 bags (MCAP or sqlite3 storage). Convert it first: `pip install rosbags && rosbags-convert --src",
+        ),
+        (unknown.as_path(), "storage \"rosbag_v2\" is not one squall reads (mcap, sqlite3)"),
+    ] {
+        let out =
+            squall(&["slam", "--log", bag.to_str().unwrap(), "--out", dir.join("refused").to_str().unwrap()]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(says), "{stderr}");
+        // --out is checked (made) with the inputs; nothing is written in it.
+        let written = std::fs::read_dir(dir.join("refused")).map_or(0, |d| d.count());
+        assert_eq!(written, 0, "nothing is written for invalid input");
+    }
+    // A .db3 without the topics asked for, likewise.
+    let out = squall(&[
+        "slam",
+        "--log",
+        db3.to_str().unwrap(),
+        "--set",
+        "source.params.odom_topic=\"/wheel_odom\"",
+        "--out",
+        dir.join("refused").to_str().unwrap(),
+    ]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no messages on odom_topic \"/wheel_odom\"; the bag's topics: "), "{stderr}");
+    assert!(stderr.contains("/odom (nav_msgs/msg/Odometry)"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

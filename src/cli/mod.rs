@@ -174,7 +174,7 @@ pub(crate) fn main() -> ExitCode {
                     for error in unreadable {
                         eprintln!("{error}");
                     }
-                    eprintln!("error: the topology is valid, but it reads files that cannot be read here");
+                    eprintln!("error: the topology is valid, but files it reads cannot be read or used here");
                     return ExitCode::from(EXIT_INVALID);
                 }
                 let tasks: usize = t.spec().components.iter().map(|c| c.parallelism).sum();

@@ -12,7 +12,7 @@ const SLAM_TOML: &str = include_str!("../../examples/topologies/slam.toml");
 
 #[derive(Debug, Clone, clap::Args)]
 pub(super) struct SlamArgs {
-    /// A CARMEN log (.clf, .clf.gz) or a ROS 2 bag (folder or .mcap);
+    /// A CARMEN log (.clf, .clf.gz) or a ROS 2 bag (folder, .mcap or .db3);
     /// without it, the simulated office.
     #[arg(long, value_name = "FILE")]
     pub(super) log: Option<PathBuf>,

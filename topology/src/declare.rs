@@ -2,6 +2,7 @@
 //! a peer message type and a tick period.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use crate::message::{Message, MessageType};
@@ -58,6 +59,18 @@ pub struct Declarer {
     pub(crate) peer: Option<MessageType>,
     pub(crate) tick: Option<Duration>,
     pub(crate) reads: Vec<PathBuf>,
+    pub(crate) input_checks: Vec<InputCheck>,
+}
+
+/// A check of a component's inputs beyond readability (see
+/// [`Declarer::check_inputs`]).
+#[derive(Clone)]
+pub(crate) struct InputCheck(pub(crate) Arc<dyn Fn() -> Result<(), String> + Send + Sync>);
+
+impl std::fmt::Debug for InputCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("InputCheck")
+    }
 }
 
 impl Declarer {
@@ -109,6 +122,19 @@ impl Declarer {
     /// invalid input, reported with the rest, not a run that fails later.
     pub fn reads(&mut self, path: impl Into<PathBuf>) -> &mut Self {
         self.reads.push(path.into());
+        self
+    }
+
+    /// Declares a check of what this component reads beyond being readable
+    /// (a bag's storage and topics): run where the files are, with the
+    /// readability checks, before a run in this process starts, once every
+    /// file the component [`reads`](Self::reads) can be read. An `Err` is
+    /// invalid input, reported at the component's params.
+    pub fn check_inputs(
+        &mut self,
+        check: impl Fn() -> Result<(), String> + Send + Sync + 'static,
+    ) -> &mut Self {
+        self.input_checks.push(InputCheck(Arc::new(check)));
         self
     }
 

@@ -102,7 +102,8 @@ impl Topology {
     }
 
     /// The files and folders the components declared they read
-    /// ([`Declarer::reads`]) that cannot be read here, each an error at
+    /// ([`Declarer::reads`]) that cannot be read here, and what their
+    /// input checks ([`Declarer::check_inputs`]) refuse, each an error at
     /// its component's params. What a run in this process checks before
     /// it starts, so that a missing log is invalid input, not a failed
     /// run. (Validation does not: a cluster's coordinator validates
@@ -110,11 +111,19 @@ impl Topology {
     pub fn unreadable_inputs(&self) -> Vec<SpecError> {
         let mut errors = Vec::new();
         for c in &self.components {
+            let at = Some((c.spec.role, c.spec.name.as_str()));
+            let before = errors.len();
             for path in &c.declared.reads {
                 if let Err(e) = crate::fsio::check_readable(path) {
-                    let at = Some((c.spec.role, c.spec.name.as_str()));
                     let message = format!("cannot read {}: {e}", path.display());
                     errors.push(self.spec.source.error_at_line(c.spec.params_line, at, message));
+                }
+            }
+            if errors.len() == before {
+                for check in &c.declared.input_checks {
+                    if let Err(message) = (check.0)() {
+                        errors.push(self.spec.source.error_at_line(c.spec.params_line, at, message));
+                    }
                 }
             }
         }

@@ -1,5 +1,7 @@
 //! ROS 2 bags: the `rosbag2` spout.
 //!
+//! Reads rosbag2's MCAP and sqlite3 (`.db3`) storage, chosen from the
+//! bag's `metadata.yaml` or the file's bytes.
 //! Emits scans (with odometry interpolated at their stamps) on `scan` and
 //! the odometry stream on `odom`, merged in stamp order, as fast as possible
 //! or at the recorded rate times a factor.
@@ -18,7 +20,10 @@ use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
 };
 
-pub use bag::{BagError, BagReadings, MAX_EXTRAPOLATION, Topics, interpolate, read_bag, read_mcap_bytes};
+pub use bag::{
+    BagError, BagReadings, MAX_EXTRAPOLATION, Storage, Topics, bag_files, check_bag, interpolate, read_bag,
+    read_mcap_bytes,
+};
 pub use cdr::CdrError;
 
 use crate::pace::{Pacer, pace};
@@ -26,7 +31,7 @@ use crate::pace::{Pacer, pace};
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct BagParams {
-    /// The bag folder or one .mcap file.
+    /// The bag folder, or one .mcap or .db3 file.
     bag: PathBuf,
     #[serde(default = "scan_topic")]
     scan_topic: String,
@@ -73,14 +78,15 @@ impl Rosbag2Spout {
     /// Builds the spout from its `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: BagParams = p.parse()?;
+        let topics = Topics {
+            skip_bad: params.skip_bad,
+            scan: params.scan_topic,
+            odom: params.odom_topic,
+            tf_static: params.tf_static_topic,
+        };
         Ok(Rosbag2Spout {
             bag: params.bag,
-            topics: Topics {
-                skip_bad: params.skip_bad,
-                scan: params.scan_topic,
-                odom: params.odom_topic,
-                tf_static: params.tf_static_topic,
-            },
+            topics,
             pacer: Pacer::new(pace(params.rate.as_ref())?),
             max_scans: params.max_scans,
             scans: VecDeque::new(),
@@ -96,6 +102,10 @@ impl Spout for Rosbag2Spout {
     fn declare(&self, d: &mut Declarer) {
         d.output::<LaserReading>("scan").output::<Odometry>("odom");
         d.reads(&self.bag);
+        // Before the run, where the bag is: a bag squall cannot read, or one
+        // without the topics asked for, is invalid input, not a failed run.
+        let (bag, topics) = (self.bag.clone(), self.topics.clone());
+        d.check_inputs(move || check_bag(&bag, &topics).map(drop).map_err(|e| e.to_string()));
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
