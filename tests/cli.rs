@@ -783,8 +783,8 @@ fn a_db3_bag_gives_byte_identical_slam_to_the_mcap_and_ros_1_bags_are_refused_be
         .unwrap();
     assert!(slam(&file, "db3-file") == from_mcap);
 
-    // A ROS 1 bag, and a storage squall does not read, are refused before
-    // the run with what to do.
+    // A ROS 1 bag, a storage squall does not read, and a .db3 without the
+    // topic asked for are refused before the run, saying what to do.
     let ros1 = dir.join("old.bag");
     std::fs::write(&ros1, b"#ROSBAG V2.0\nE\0\0\0").unwrap();
     let unknown = dir.join("unknown");
@@ -794,36 +794,31 @@ fn a_db3_bag_gives_byte_identical_slam_to_the_mcap_and_ros_1_bags_are_refused_be
         yaml.replace("storage_identifier: sqlite3", "storage_identifier: rosbag_v2"),
     )
     .unwrap();
-    for (bag, says) in [
+    let wheel_odom = ["--set", "source.params.odom_topic=\"/wheel_odom\""];
+    for (bag, sets, says) in [
         (
             ros1.as_path(),
+            &[][..],
             "a ROS 1 bag; squall reads ROS 2 bags (MCAP or sqlite3 storage). Convert it first: `pip install rosbags && rosbags-convert --src",
         ),
-        (unknown.as_path(), "storage \"rosbag_v2\" is not one squall reads (mcap, sqlite3)"),
+        (unknown.as_path(), &[][..], "storage \"rosbag_v2\" is not one squall reads (mcap, sqlite3)"),
+        (db3.as_path(), &wheel_odom[..], "no messages on odom_topic \"/wheel_odom\"; the bag's topics: "),
     ] {
-        let out =
-            squall(&["slam", "--log", bag.to_str().unwrap(), "--out", dir.join("refused").to_str().unwrap()]);
+        let refused = dir.join("refused");
+        let mut args = vec!["slam", "--log", bag.to_str().unwrap()];
+        args.extend(sets);
+        args.extend(["--out", refused.to_str().unwrap()]);
+        let out = squall(&args);
         let stderr = text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{stderr}");
         assert!(stderr.contains(says), "{stderr}");
         // --out is checked (made) with the inputs; nothing is written in it.
-        let written = std::fs::read_dir(dir.join("refused")).map_or(0, |d| d.count());
+        let written = std::fs::read_dir(&refused).map_or(0, |d| d.count());
         assert_eq!(written, 0, "nothing is written for invalid input");
+        if !sets.is_empty() {
+            assert!(stderr.contains("/odom (nav_msgs/msg/Odometry)"), "{stderr}");
+        }
     }
-    // A .db3 without the topics asked for, likewise.
-    let out = squall(&[
-        "slam",
-        "--log",
-        db3.to_str().unwrap(),
-        "--set",
-        "source.params.odom_topic=\"/wheel_odom\"",
-        "--out",
-        dir.join("refused").to_str().unwrap(),
-    ]);
-    let stderr = text(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("no messages on odom_topic \"/wheel_odom\"; the bag's topics: "), "{stderr}");
-    assert!(stderr.contains("/odom (nav_msgs/msg/Odometry)"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

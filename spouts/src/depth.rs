@@ -153,7 +153,7 @@ impl Spout for DepthSimSpout {
         config.check()?;
         let frames = (self.p.duration_secs * self.p.frame_hz) as u64;
         ctx.expect_emits(2 * frames);
-        self.readings = ctx.readings("frames", Some(frames));
+        self.readings = ctx.readings("frames", || Some(frames));
         let crowd = Crowd::new(&floor, self.p.people, self.seed)?;
         self.sim = Some(World {
             sim: Simulation::new(floor, config)?,

@@ -194,7 +194,7 @@ impl Spout for LiveIngest {
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
-        self.readings = ctx.readings("scans", None);
+        self.readings = ctx.readings("scans", || None);
         let session = shared(&self.options).await?;
         let scans = session.declare_subscriber(self.keys.0.clone()).await?;
         let odometry = match self.format {

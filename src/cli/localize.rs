@@ -163,9 +163,9 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
         sets.push("matcher.params.leave_out_corners=true".into());
         // The camera's noise grows with the square of depth: FSPF keeps far
         // walls by that law and refits their normals, and the matcher weighs
-        // each point by it, both with the simulated camera's own law
-        // (docs/decisions/0025-far-walls-and-the-cameras-noise.md, 0026).
-        let noise = squall_core::depth_render::DepthNoise::default().sigma_per_z2;
+        // each point by it, both with the law of the camera `depth_sim`
+        // renders with (docs/decisions/0025-far-walls-and-the-cameras-noise.md, 0026).
+        let noise = squall_core::depth_render::DepthCamera::d435_on_robot().noise.sigma_per_z2;
         sets.push(format!("points.params.noise_per_z2={noise}"));
         sets.push(format!("matcher.params.noise_per_r2={noise}"));
     }

@@ -22,6 +22,12 @@ pub(super) struct ProgressDisplay {
 }
 
 impl ProgressDisplay {
+    /// Whether [`start`](Self::start) will show anything: stderr is a
+    /// terminal, or info lines of this module are logged.
+    pub(super) fn wanted() -> bool {
+        std::io::stderr().is_terminal() || tracing::enabled!(tracing::Level::INFO)
+    }
+
     /// Starts drawing, if stderr is a terminal, or logging, if info lines
     /// of this module are logged.
     pub(super) fn start(progress: Arc<Progress>) -> Self {

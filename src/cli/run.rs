@@ -49,8 +49,10 @@ pub(super) fn run_scored(
         return ExitCode::from(EXIT_INVALID);
     }
     let progress = Arc::new(Progress::default());
-    let options =
-        RunOptions { out_dir: out.clone(), progress: Some(progress.clone()), ..RunOptions::default() };
+    // Counters only when something shows them: what spouts do for the
+    // display (a log's scans counted ahead) is then left undone.
+    let watched = ProgressDisplay::wanted().then(|| progress.clone());
+    let options = RunOptions { out_dir: out.clone(), progress: watched, ..RunOptions::default() };
     stop_on_ctrl_c(options.stop.clone());
     let result = match cluster {
         None => {

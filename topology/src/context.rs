@@ -75,15 +75,16 @@ impl TaskContext {
     }
 
     /// Tells the progress display that this spout's task emits sensor
-    /// readings, each one a `unit` ("scans", "frames"), `total` of them in
-    /// all when known; count each with the counter returned. The display
+    /// readings, each one a `unit` ("scans", "frames"), `total()` of them
+    /// in all when known; count each with the counter returned. The display
     /// then shows readings, a percentage and an ETA rather than tuples
     /// (which count odometry and side streams too). The first unit given
-    /// in a run names them all.
-    pub fn readings(&self, unit: &str, total: Option<u64>) -> ReadingCounter {
+    /// in a run names them all. `total` is called only when a display
+    /// watches the run, so a spout may count its input for it.
+    pub fn readings(&self, unit: &str, total: impl FnOnce() -> Option<u64>) -> ReadingCounter {
         if let Some(p) = &self.progress {
             let _ = p.reading_unit.set(unit.to_string());
-            p.expected_readings.fetch_add(total.unwrap_or(0), Ordering::Relaxed);
+            p.expected_readings.fetch_add(total().unwrap_or(0), Ordering::Relaxed);
         }
         ReadingCounter { progress: self.progress.clone() }
     }

@@ -151,7 +151,7 @@ impl Registry {
     }
 
     /// The Cargo feature that brings `kind`, if this build leaves it out.
-    pub fn feature_for(&self, kind: &str) -> Option<&str> {
+    pub(crate) fn feature_for(&self, kind: &str) -> Option<&str> {
         self.missing.get(kind).map(String::as_str)
     }
 

@@ -93,10 +93,14 @@ impl Spout for CarmenSpout {
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
         self.pacer.watch(ctx.stop());
         self.reader = Some(LogReader::open(&self.log, self.options)?);
-        // One quick pass for the count, so that the display can show a
-        // percentage and an ETA (a log is read far faster than matched).
-        let front = count_front_scans(&self.log)?;
-        self.readings = ctx.readings("scans", Some(self.max_scans.map_or(front, |m| m.min(front))));
+        // One quick pass for the count, when a display shows a percentage
+        // and an ETA (a log is read far faster than matched); a log it
+        // cannot read is reported by the reader, with the line.
+        let (log, max_scans) = (&self.log, self.max_scans);
+        self.readings = ctx.readings("scans", || {
+            let front = count_front_scans(log).ok()?;
+            Some(max_scans.map_or(front, |m| m.min(front)))
+        });
         Ok(())
     }
 

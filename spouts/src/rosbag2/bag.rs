@@ -326,20 +326,13 @@ fn db3_channels(db: &rusqlite::Connection, file: &Path) -> Result<HashMap<i64, C
     rows.collect::<Result<HashMap<_, _>, _>>().map_err(|e| sqlite_error(file, e))
 }
 
-/// The (topic, type) pairs of a `.db3` that carry messages.
+/// The (topic, type) pairs a `.db3` declares in its `topics` table, as
+/// an MCAP summary declares its channels: read without touching the
+/// messages (a topic declared but empty is found when the bag is read).
 fn db3_topics(file: &Path) -> Result<Vec<(String, String)>, BagError> {
-    let db = open_db3(file)?;
-    let channels = db3_channels(&db, file)?;
-    let mut statement =
-        db.prepare("SELECT DISTINCT topic_id FROM messages").map_err(|e| sqlite_error(file, e))?;
-    let ids = statement.query_map([], |row| row.get::<_, i64>(0)).map_err(|e| sqlite_error(file, e))?;
-    let mut out = Vec::new();
-    for id in ids {
-        if let Some(c) = channels.get(&id.map_err(|e| sqlite_error(file, e))?) {
-            out.push((c.topic.clone(), c.schema.clone()));
-        }
-    }
-    Ok(out)
+    let mut channels: Vec<(i64, Channel)> = db3_channels(&open_db3(file)?, file)?.into_iter().collect();
+    channels.sort_by_key(|(id, _)| *id);
+    Ok(channels.into_iter().map(|(_, c)| (c.topic, c.schema)).collect())
 }
 
 /// The (topic, type) pairs of an MCAP file's summary section, read from

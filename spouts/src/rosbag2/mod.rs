@@ -128,7 +128,7 @@ impl Spout for Rosbag2Spout {
             self.odometry = readings.odometry.into();
         }
         ctx.expect_emits((scans.len() + self.odometry.len()) as u64);
-        self.readings = ctx.readings("scans", Some(scans.len() as u64));
+        self.readings = ctx.readings("scans", || Some(scans.len() as u64));
         self.scans = scans.into();
         self.without_odometry = readings.scans_without_odometry;
         self.skipped = readings.skipped;

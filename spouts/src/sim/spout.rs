@@ -109,7 +109,7 @@ impl Spout for SimSpout {
         let floor = super::floor_for(&self.world, self.config.seed)?;
         let scans = (self.config.duration_secs * self.config.scan_hz) as u64;
         ctx.expect_emits(scans * 3);
-        self.readings = ctx.readings("scans", Some(self.max_scans.map_or(scans, |m| m.min(scans))));
+        self.readings = ctx.readings("scans", || Some(self.max_scans.map_or(scans, |m| m.min(scans))));
         self.sim = Some(Simulation::new(floor, self.config.clone())?);
         Ok(())
     }
