@@ -87,7 +87,7 @@ fn custom(metrics: &serde_json::Value, component: &str, name: &str) -> u64 {
 
 #[test]
 fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
-    for format in ["cdr", "squall"] {
+    for format in ["ros2", "squall"] {
         let scans = 150;
         let (report, metrics) = round_trip(format, scans);
         assert_eq!(number(&report, "scans sent:"), scans, "{report}");
@@ -114,22 +114,25 @@ fn a_robot_gets_a_pose_back_for_its_scans_in_cdr_and_in_squalls_format() {
     }
 }
 
-/// Runs the live topology and the independent Python client (the
-/// eclipse-zenoh package, CDR encoded with Python's struct; `.ci/run`
-/// installs the package) with `args`; returns the client's report and the
-/// run's metrics.
+/// Runs the live topology and the independent ROS 2 client (written from
+/// rmw_zenoh's design with the eclipse-zenoh package, messages by
+/// `rosbags`, GIDs by `xxhash`; `.ci/run` installs all three, pinned)
+/// with `args`; returns the client's report and the run's metrics.
 fn python_round_trip(args: &[&str]) -> (serde_json::Value, serde_json::Value) {
-    let check = Command::new("python3").args(["-c", "import zenoh"]).output();
+    let check = Command::new("python3").args(["-c", "import zenoh, rosbags, xxhash"]).output();
     assert!(
         check.as_ref().is_ok_and(|o| o.status.success()),
-        "this test needs python3 with the eclipse-zenoh package (pip install eclipse-zenoh==1.10.2)"
+        "this test needs python3 with eclipse-zenoh, rosbags and xxhash (see .ci/run for the pinned versions)"
     );
     let port = free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let listen = format!("[\"{endpoint}\"]");
     let out = tempfile::tempdir().unwrap();
-    let run = start_live(&listen, &["source.params.idle_secs=3.0".to_string()], out.path());
-    let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/cdr_robot.py");
+    // A map at every correction (at most every 2 s): some go out while
+    // nobody listens on /map, for the late subscriber to find cached.
+    let sets = ["source.params.idle_secs=3.0".to_string(), "matcher.params.map_interval=1".to_string()];
+    let run = start_live(&listen, &sets, out.path());
+    let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/ros2_robot.py");
     let robot = output(Command::new("python3").arg(client).args(["--connect", &endpoint]).args(args));
     let ran = finish_within(run, HUNG, String::new);
     let stdout = String::from_utf8_lossy(&robot.stdout);
@@ -141,18 +144,92 @@ fn python_round_trip(args: &[&str]) -> (serde_json::Value, serde_json::Value) {
     (report, metrics)
 }
 
+/// The client's last pose: the robot drove 2.95 m along the corridor.
+fn assert_drove_the_corridor(report: &serde_json::Value) {
+    let last = report["last_pose"].as_array().unwrap();
+    let (x, y) = (last[1].as_f64().unwrap(), last[2].as_f64().unwrap());
+    assert!((x - 2.95).abs() < 0.1 && y.abs() < 0.05, "{report}");
+}
+
 #[test]
-fn an_independent_ros_2_client_gets_poses_back() {
+fn a_ros_2_client_finds_squall_in_the_graph_and_gets_poses_transforms_and_the_map() {
     let (report, metrics) = python_round_trip(&["--scans", "60"]);
+    // squall's node, publishers and subscriptions, as the client read them
+    // from the liveliness tokens, with the type hashes rosbags computes.
+    let entities: Vec<&str> =
+        report["squall_entities"].as_array().unwrap().iter().map(|e| e.as_str().unwrap()).collect();
+    let hash = |ty: &str| report["expected_hashes"][ty].as_str().unwrap().to_string();
+    let expected = [
+        "NN".to_string(),
+        format!(
+            "MS /scan sensor_msgs::msg::dds_::LaserScan_ {} ::,10:,:,:,,",
+            hash("sensor_msgs/msg/LaserScan")
+        ),
+        format!("MS /odom nav_msgs::msg::dds_::Odometry_ {} ::,10:,:,:,,", hash("nav_msgs/msg/Odometry")),
+        format!("MS /tf tf2_msgs::msg::dds_::TFMessage_ {} ::,10:,:,:,,", hash("tf2_msgs/msg/TFMessage")),
+        format!(
+            "MP /pose geometry_msgs::msg::dds_::PoseStamped_ {} ::,10:,:,:,,",
+            hash("geometry_msgs/msg/PoseStamped")
+        ),
+        format!(
+            "MP /map nav_msgs::msg::dds_::OccupancyGrid_ {} :1:,1:,:,:,,",
+            hash("nav_msgs/msg/OccupancyGrid")
+        ),
+        format!("MP /tf tf2_msgs::msg::dds_::TFMessage_ {} ::,100:,:,:,,", hash("tf2_msgs/msg/TFMessage")),
+    ];
+    for e in &expected {
+        assert!(entities.iter().filter(|x| *x == e).count() >= 1, "no {e:?} in {entities:?}");
+    }
+    // Every sample carried rmw_zenoh's attachment, in sequence, with the
+    // GID of its publisher's token; squall took the client's as such.
+    assert_eq!(report["attachment_errors"], serde_json::json!([]), "{report}");
+    assert_eq!(custom(&metrics, "source", "without_attachment"), 0, "{metrics}");
+    assert_eq!(custom(&metrics, "source", "malformed"), 0, "{metrics}");
+    // A pose for every scan the live dispatcher kept, in the map frame.
     let poses = report["poses_received"].as_u64().unwrap();
     let dropped = custom(&metrics, "dispatcher", "dropped_readings");
     assert_eq!(custom(&metrics, "source", "scans_received"), 60, "{report}");
     assert_eq!(poses + dropped, 60, "{report}");
     assert!(poses >= 54, "{report}");
-    // The robot drove 2.95 m along the corridor's axis.
-    let last = report["last_pose"].as_array().unwrap();
-    let (x, y) = (last[1].as_f64().unwrap(), last[2].as_f64().unwrap());
-    assert!((x - 2.95).abs() < 0.1 && y.abs() < 0.05, "{report}");
+    assert_eq!(report["pose_frames"], serde_json::json!(["map"]), "{report}");
+    assert_drove_the_corridor(&report);
+    // map -> odom at the pose rate: composed with the robot's odometry at
+    // the same stamp, it is the pose.
+    let matched = report["transforms_matched"].as_u64().unwrap();
+    assert!(matched * 10 >= poses * 9, "{report}");
+    assert!(report["tf_max_error"].as_f64().unwrap() < 1e-6, "{report}");
+    assert_eq!(
+        custom(&metrics, "publish", "transforms_sent")
+            + custom(&metrics, "publish", "transforms_without_odometry"),
+        custom(&metrics, "publish", "poses_sent"),
+        "{metrics}"
+    );
+    // The map, to a subscriber that joined after it was sent
+    // (transient-local), whole and in the map frame.
+    let map = &report["late_map"];
+    assert_eq!(map["frame"], "map", "{report}");
+    assert_eq!(
+        map["sent_before_joining"], true,
+        "the first map the late subscriber got was not the cached one: {report}"
+    );
+    let cells = map["width"].as_u64().unwrap() * map["height"].as_u64().unwrap();
+    assert!(cells > 0 && map["cells"].as_u64() == Some(cells), "{report}");
+    assert!(
+        map["occupied"].as_u64().unwrap() > 0 && map["known"].as_u64() > map["occupied"].as_u64(),
+        "{report}"
+    );
+}
+
+#[test]
+fn the_robots_own_odom_to_base_link_on_tf_is_its_odometry() {
+    let (report, metrics) = python_round_trip(&["--scans", "60", "--odometry", "tf"]);
+    assert_eq!(custom(&metrics, "source", "odometry_from_tf"), 1, "{metrics}");
+    assert_eq!(custom(&metrics, "source", "scans_without_odometry"), 0, "{metrics}");
+    let poses = report["poses_received"].as_u64().unwrap();
+    assert_eq!(poses + custom(&metrics, "dispatcher", "dropped_readings"), 60, "{report}");
+    assert!(poses >= 54, "{report}");
+    assert_drove_the_corridor(&report);
+    assert!(report["tf_max_error"].as_f64().unwrap() < 1e-6, "{report}");
 }
 
 #[test]
@@ -161,9 +238,11 @@ fn poses_no_robot_listens_for_are_counted_as_unheard_not_sent() {
     assert_eq!(report["poses_received"].as_u64(), Some(0), "{report}");
     let dropped = custom(&metrics, "dispatcher", "dropped_readings");
     assert_eq!(custom(&metrics, "source", "scans_received"), 40, "{report}");
-    // A pose for every reading taken, none of them claimed as sent.
+    // A pose for every reading taken, none of them claimed as sent; nor
+    // the corrections, although squall itself listens on /tf.
     assert_eq!(custom(&metrics, "publish", "poses_unheard") + dropped, 40, "{metrics}");
     assert_eq!(custom(&metrics, "publish", "poses_sent"), 0, "{metrics}");
+    assert_eq!(custom(&metrics, "publish", "transforms_sent"), 0, "{metrics}");
 }
 
 #[test]

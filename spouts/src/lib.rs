@@ -7,6 +7,7 @@ mod error;
 #[cfg(feature = "cluster")]
 pub mod live;
 pub mod pace;
+pub mod rmw_zenoh;
 pub mod rosbag2;
 pub mod sim;
 

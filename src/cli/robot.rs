@@ -11,7 +11,9 @@ use std::time::{Duration, Instant};
 
 use squall_core::sensor::{LaserReading, PoseStamped};
 use squall_spouts::carmen::{ReadOptions, read_front_scans};
-use squall_spouts::live::{Format, MAP_KEY, ODOM_KEY, POSE_KEY, SCAN_KEY};
+use squall_spouts::live::node::RosNode;
+use squall_spouts::live::{Format, MAP_TOPIC, ODOM_TOPIC, POSE_TOPIC, SCAN_TOPIC, squall_key};
+use squall_spouts::rmw_zenoh::{self, Qos};
 use squall_spouts::rosbag2::messages;
 use squall_topology::cluster::session::{SessionOptions, endpoints, open};
 
@@ -26,8 +28,9 @@ pub(super) struct RobotArgs {
     /// The topology's live link endpoint (repeatable).
     #[arg(long, value_name = "ENDPOINT", required = true)]
     connect: Vec<String>,
-    /// `cdr` (ROS 2 messages, as over rmw_zenoh) or `squall`.
-    #[arg(long, default_value = "cdr", value_parser = ["cdr", "squall"])]
+    /// `ros2` (a ROS 2 robot over rmw_zenoh: `/scan`, `/odom` in, `/pose`,
+    /// `/map` back) or `squall` (squall's own messages). `cdr` is `ros2`.
+    #[arg(long, default_value = "ros2", value_parser = ["ros2", "cdr", "squall"])]
     format: String,
     /// Playback speed: 1 is the log's own pace.
     #[arg(long, default_value_t = 1.0)]
@@ -70,7 +73,7 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
         eprintln!("squall robot: --speed {}: expected a factor > 0", args.speed);
         return ExitCode::from(EXIT_INVALID);
     }
-    let format = if args.format == "squall" { Format::Squall } else { Format::Cdr };
+    let format = if args.format == "squall" { Format::Squall } else { Format::Ros2 };
     let mut scans = match read_front_scans(&args.log, ReadOptions::default()) {
         Ok(s) => s,
         Err(e) => {
@@ -103,14 +106,37 @@ async fn play(
 ) -> anyhow::Result<()> {
     let session = open(&options).await?;
     let zenoh_error = |e: zenoh::Error| anyhow::anyhow!("{e}");
-    let poses = session.declare_subscriber(POSE_KEY).await.map_err(zenoh_error)?;
-    let maps = session.declare_subscriber(MAP_KEY).await.map_err(zenoh_error)?;
-    let scan_publisher = session.declare_publisher(SCAN_KEY).await.map_err(zenoh_error)?;
-    let odom_publisher = session.declare_publisher(ODOM_KEY).await.map_err(zenoh_error)?;
+    let boxed = |e: squall_topology::BoxError| anyhow::anyhow!("{e}");
+    let fifo = || zenoh::handlers::FifoChannel::new(1024);
+    // As a ROS 2 robot over rmw_zenoh: the node `squall_robot` with its
+    // publishers and subscriptions; or squall's plain keys.
+    let (_node, poses, maps, mut scan_publisher, mut odom_publisher) = match format {
+        Format::Ros2 => {
+            let node = RosNode::shared(&session, 0, "squall_robot").await.map_err(boxed)?;
+            let poses =
+                node.subscription(POSE_TOPIC, &rmw_zenoh::POSE_STAMPED, fifo()).await.map_err(boxed)?;
+            let maps =
+                node.subscription(MAP_TOPIC, &rmw_zenoh::OCCUPANCY_GRID, fifo()).await.map_err(boxed)?;
+            let scan =
+                node.publisher(SCAN_TOPIC, &rmw_zenoh::LASER_SCAN, Qos::DEFAULT).await.map_err(boxed)?;
+            let odom = node.publisher(ODOM_TOPIC, &rmw_zenoh::ODOMETRY, Qos::DEFAULT).await.map_err(boxed)?;
+            (Some(node), Subscription::Ros2(poses), Subscription::Ros2(maps), Sender::Ros2(scan), Some(odom))
+        }
+        Format::Squall => {
+            let subscribe =
+                |topic: &str| session.declare_subscriber(squall_key(topic).to_string()).with(fifo());
+            let poses = subscribe(POSE_TOPIC).await.map_err(zenoh_error)?;
+            let maps = subscribe(MAP_TOPIC).await.map_err(zenoh_error)?;
+            let scan =
+                session.declare_publisher(squall_key(SCAN_TOPIC).to_string()).await.map_err(zenoh_error)?;
+            (None, Subscription::Squall(poses), Subscription::Squall(maps), Sender::Squall(scan), None)
+        }
+    };
+    let (poses, maps) = (poses.handler(), maps.handler());
     // Drive only once the topology subscribes to the scans: what is
     // published before that reaches nobody.
     let deadline = Instant::now() + Duration::from_secs_f64(args.connect_secs);
-    while !scan_publisher.matching_status().await.map_err(zenoh_error)?.matching() {
+    while !scan_publisher.matching().await? {
         anyhow::ensure!(
             Instant::now() < deadline,
             "no link to a topology taking scans at {:?} after {} s",
@@ -125,7 +151,7 @@ async fn play(
     let mut take = |sample: zenoh::sample::Sample, sent: &HashMap<i64, Instant>, latencies: &mut Vec<f64>| {
         let bytes = sample.payload().to_bytes();
         let stamp = match format {
-            Format::Cdr => messages::read_pose_stamped(&bytes).map(|(h, _)| h.stamp).ok(),
+            Format::Ros2 => messages::read_pose_stamped(&bytes).map(|(h, _)| h.stamp).ok(),
             Format::Squall => postcard::from_bytes::<PoseStamped>(&bytes).map(|p| p.stamp).ok(),
         };
         match stamp.and_then(|s| sent.get(&stamp_key(s))) {
@@ -147,13 +173,13 @@ async fn play(
             }
         }
         sent.insert(stamp_key(scan.stamp), Instant::now());
-        match format {
-            Format::Cdr => {
+        match (format, &mut odom_publisher) {
+            (Format::Ros2, Some(odom)) => {
                 let odometry = messages::odometry_cdr(scan.stamp, "odom", "base_link", &scan.odometry);
-                odom_publisher.put(odometry).await.map_err(zenoh_error)?;
-                scan_publisher.put(messages::laser_scan_cdr(scan, "laser")).await.map_err(zenoh_error)?;
+                odom.put(odometry).await.map_err(boxed)?;
+                scan_publisher.put(messages::laser_scan_cdr(scan, "laser")).await?;
             }
-            Format::Squall => scan_publisher.put(postcard::to_stdvec(scan)?).await.map_err(zenoh_error)?,
+            _ => scan_publisher.put(postcard::to_stdvec(scan)?).await?,
         }
     }
     let end = Instant::now() + Duration::from_secs_f64(args.wait_secs);
@@ -183,4 +209,45 @@ async fn play(
         outln!("poses not matching a scan sent: {malformed}");
     }
     Ok(())
+}
+
+/// Where the robot's scans go.
+enum Sender {
+    Ros2(squall_spouts::live::node::RosPublisher),
+    Squall(zenoh::pubsub::Publisher<'static>),
+}
+
+impl Sender {
+    async fn matching(&self) -> anyhow::Result<bool> {
+        match self {
+            Sender::Ros2(p) => p.matching().await.map_err(|e| anyhow::anyhow!("{e}")),
+            Sender::Squall(p) => {
+                Ok(p.matching_status().await.map_err(|e| anyhow::anyhow!("{e}"))?.matching())
+            }
+        }
+    }
+
+    async fn put(&mut self, bytes: Vec<u8>) -> anyhow::Result<()> {
+        match self {
+            Sender::Ros2(p) => p.put(bytes).await.map_err(|e| anyhow::anyhow!("{e}")),
+            Sender::Squall(p) => p.put(bytes).await.map_err(|e| anyhow::anyhow!("{e}")),
+        }
+    }
+}
+
+type Fifo = zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>;
+
+/// What the robot hears back.
+enum Subscription {
+    Ros2(squall_spouts::live::node::RosSubscription<Fifo>),
+    Squall(zenoh::pubsub::Subscriber<Fifo>),
+}
+
+impl Subscription {
+    fn handler(&self) -> &Fifo {
+        match self {
+            Subscription::Ros2(s) => s.subscriber.handler(),
+            Subscription::Squall(s) => s.handler(),
+        }
+    }
 }

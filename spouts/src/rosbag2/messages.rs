@@ -1,7 +1,8 @@
 //! The ROS 2 messages squall reads, decoded from CDR:
 //! `sensor_msgs/msg/LaserScan`, `nav_msgs/msg/Odometry`,
 //! `tf2_msgs/msg/TFMessage`; and those it sends back to a robot, encoded:
-//! `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/OccupancyGrid`.
+//! `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/OccupancyGrid`,
+//! `tf2_msgs/msg/TFMessage`.
 
 use squall_core::geometry::Pose2;
 use squall_core::sensor::{LaserReading, Odometry};
@@ -258,6 +259,32 @@ pub fn odometry_cdr(stamp: f64, frame_id: &str, child_frame_id: &str, pose: &Pos
     write_pose(&mut w, pose);
     for _ in 0..36 + 6 + 36 {
         w.f64(0.0);
+    }
+    w.finish()
+}
+
+/// One transform to send: the `child_frame_id` frame's pose in
+/// `frame_id` at `stamp`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TransformOut<'a> {
+    /// Seconds.
+    pub stamp: f64,
+    /// The parent frame.
+    pub frame_id: &'a str,
+    /// The child frame.
+    pub child_frame_id: &'a str,
+    /// The child's pose in the parent frame.
+    pub pose: Pose2,
+}
+
+/// Encodes a `tf2_msgs/msg/TFMessage` of planar transforms.
+pub fn tf_message_cdr(transforms: &[TransformOut<'_>]) -> Vec<u8> {
+    let mut w = CdrWriter::new();
+    w.u32(u32::try_from(transforms.len()).unwrap_or(u32::MAX));
+    for t in transforms {
+        write_header(&mut w, t.stamp, t.frame_id);
+        w.string(t.child_frame_id);
+        write_pose(&mut w, &t.pose);
     }
     w.finish()
 }

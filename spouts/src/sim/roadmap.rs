@@ -85,23 +85,31 @@ pub fn roadmap(world: LineMap, spacing: Real, margin: Real) -> Result<Floor, Roa
     if !(spacing.is_finite() && spacing > 0.0) {
         return Err(RoadmapError::Spacing(spacing));
     }
+    let spacing_asked = spacing;
     let (x0, y0, x1, y1) = world.bounds();
     let reach = (x1 - x0).hypot(y1 - y0);
     // Points per row and rows (the casts saturate; a map without walls has
     // inverted bounds and gets one point, which nothing encloses).
-    let points = |extent: Real| (extent / spacing) as usize;
+    let points = |extent: Real, spacing: Real| (extent / spacing) as usize;
     // The grid's ids must be countable and fit in a Vec.
     let fits = |n: usize| n <= isize::MAX as usize / std::mem::size_of::<usize>();
-    let (mut nx, mut ny) = match (points(x1 - x0).checked_add(1), points(y1 - y0).checked_add(1)) {
-        (Some(nx), Some(ny)) if nx.checked_mul(ny).is_some_and(fits) => (nx, ny),
-        _ => return Err(RoadmapError::TooLarge(spacing)),
-    };
+    let (mut nx, mut ny) =
+        match (points(x1 - x0, spacing).checked_add(1), points(y1 - y0, spacing).checked_add(1)) {
+            (Some(nx), Some(ny)) if nx.checked_mul(ny).is_some_and(fits) => (nx, ny),
+            _ => return Err(RoadmapError::TooLarge(spacing)),
+        };
     // A map far larger than a building (a site kilometres wide) gets a
     // coarser grid rather than hours of work: routes need no finer one.
+    // Scaling the spacing by √(points / budget) brings a square site
+    // within the budget at once; a long thin one (a single wall
+    // kilometres long) needs a few rounds, as its short side stays one
+    // point whatever the spacing.
     let mut spacing = spacing;
-    if nx * ny > MAX_POINTS {
-        spacing *= ((nx * ny) as Real / MAX_POINTS as Real).sqrt();
-        (nx, ny) = (points(x1 - x0) + 1, points(y1 - y0) + 1);
+    while nx * ny > MAX_POINTS {
+        spacing *= ((nx * ny) as Real / MAX_POINTS as Real).sqrt().max(1.01);
+        (nx, ny) = (points(x1 - x0, spacing) + 1, points(y1 - y0, spacing) + 1);
+    }
+    if spacing != spacing_asked {
         tracing::info!(spacing, "the map is large: roadmap points every {spacing:.2} m");
     }
     let mut id = vec![usize::MAX; nx * ny];
@@ -227,5 +235,16 @@ mod tests {
         let (a, b) = (floor.nodes[0], floor.nodes[1]);
         let step = (b.0 - a.0).hypot(b.1 - a.1);
         assert!((step - 1.0).abs() < 0.01, "points {step} m apart");
+    }
+
+    #[test]
+    fn a_wall_ten_billion_kilometres_long_stays_within_the_budget() {
+        // 2·10¹³ points in one row at 0.5 m, coarsened until the row fits
+        // the budget (the fuzzer once found ids allocated for billions of
+        // points: the count was taken at the spacing asked for). The wall
+        // encloses nothing, so the answer is no free space.
+        let wall = LineMap::parse("wall", "0,0,1e13,0\n").unwrap();
+        let err = roadmap(wall, 0.5, 0.4).unwrap_err();
+        assert!(matches!(err, RoadmapError::NoFreeSpace { .. }), "{err}");
     }
 }
