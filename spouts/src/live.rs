@@ -98,9 +98,10 @@ pub fn squall_key(topic: &str) -> &str {
     topic.trim_start_matches('/')
 }
 
-/// Where the link is and how it speaks, common to both components.
+/// Where the link is and how it speaks, common to both components
+/// (flattened into each one's parameters, which refuse what neither
+/// knows: [`no_unknown`]).
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 struct LinkParams {
     #[serde(default)]
     listen: Vec<String>,

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use squall_bolts::cgr::fspf::FspfOptions;
 use squall_core::eval::map_frame;
 use squall_core::geometry::Pose2;
 use squall_core::trajectory::Trajectory;
@@ -79,6 +80,11 @@ const GLOBAL_PARTICLES: usize = 2000;
 /// Particles that track a robot already found (and the fewest a global
 /// start keeps).
 const TRACKING_PARTICLES: usize = 50;
+
+/// Independent points a plane patch of the depth path's FSPF counts as:
+/// its samples fix the wall's offset and direction there, and share the
+/// patch's normal and the local error of wall and map. Decision 0029.
+const PATCH_EVIDENCE: f64 = 4.0;
 
 fn quoted(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
@@ -168,6 +174,13 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
         let noise = squall_core::depth_render::DepthCamera::d435_on_robot().noise.sigma_per_z2;
         sets.push(format!("points.params.noise_per_z2={noise}"));
         sets.push(format!("matcher.params.noise_per_r2={noise}"));
+        // FSPF's points come in plane patches of `local_samples` (80) that
+        // share their normal and their wall's local error: a patch counts
+        // as PATCH_EVIDENCE independent points, not as 80, so a frame's
+        // evidence grows with the surfaces seen rather than with the
+        // points asked for (docs/decisions/0029-a-plane-patch-as-evidence.md).
+        let per_patch = FspfOptions::default().local_samples as f64 / PATCH_EVIDENCE;
+        sets.push(format!("matcher.params.correlation={per_patch}"));
     }
     match args.init.as_str() {
         "global" => {

@@ -315,6 +315,10 @@ impl CgrModel {
 /// behind walls or facing the wrong way are; unless they fill a stretch of
 /// the view wider than `occluder_size`, as another place's walls do. −∞
 /// for a reading without points, which the injection rule passes over.
+/// The fit is how well the points lie on the walls, whatever weight the
+/// particles give each of them: it is counted at the default correlation
+/// ([`FIT_CORRELATION`]) however `correlation` is set, so that the
+/// injection rule's dead band (`min_drop`) means the same drop of fit.
 fn fit(e: &Evaluation, input: &Observation2d, o: &CgrOptions) -> Real {
     let points = input.points.len();
     if points == 0 {
@@ -322,8 +326,13 @@ fn fit(e: &Evaluation, input: &Observation2d, o: &CgrOptions) -> Real {
     }
     let obstacles = e.widest_short_run() <= o.occluder_size;
     let short = if o.occlusion_fits && obstacles { e.short as Real } else { 0.0 };
-    (e.log_likelihood - short * o.outlier_log_likelihood()) / points as Real
+    let per_point = (e.log_likelihood - short * o.outlier_log_likelihood()) / points as Real;
+    per_point * (o.correlation / FIT_CORRELATION)
 }
+
+/// The correlation the fit of a reading is counted at (each point 1/5):
+/// `CgrOptions::correlation`'s default, in whose units `min_drop` is set.
+const FIT_CORRELATION: Real = 5.0;
 
 /// Two observed surfaces at least this far apart in direction, degrees,
 /// fix a proposed pose's position (see `CgrModel::propose`).
@@ -677,6 +686,23 @@ mod tests {
         // sectors of 5.6°, 0.15 m at this distance).
         assert!(fit_of(&with(true), &surface_ahead(0.6)).abs() < 1e-12);
         assert!((fit_of(&with(true), &surface_ahead(1.6)) - outliers).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_fit_does_not_depend_on_how_much_each_point_weighs() {
+        // The same wall 3 m across where the map has open floor, weighed
+        // with each point counted 1/5 and 1/20: the particles' weights
+        // differ fourfold, the fit augmented MCL watches does not.
+        let at = Pose2::new(5.0, 3.0, 0.0);
+        let correct = |correlation: Real| {
+            let cgr = CgrOptions { correlation, refine_iterations: 0, ..CgrOptions::default() };
+            let m =
+                CgrModel::new(room(), None, LocalizeOptions { cgr, ..LocalizeOptions::default() }).unwrap();
+            m.correct(&mut at.clone(), &surface_ahead(3.0), &mut (), &mut ChaCha8Rng::seed_from_u64(1))
+        };
+        let (five, twenty) = (correct(5.0), correct(20.0));
+        assert!((five.log_likelihood - 4.0 * twenty.log_likelihood).abs() < 1e-9);
+        assert!(five.fit < 0.0 && (five.fit - twenty.fit).abs() < 1e-12, "{} {}", five.fit, twenty.fit);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! map) keep their last samples in zenoh-ext's advanced publisher cache,
 //! where rmw_zenoh's late subscribers ask for them.
 
-use std::sync::{Arc, Mutex, Weak};
+use std::sync::{Arc, Weak};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use squall_topology::BoxError;
@@ -33,23 +33,19 @@ pub struct RosNode {
 /// A declared node: session id, domain, name.
 type NodeEntry = (String, u32, String, Weak<RosNode>);
 
-/// The nodes declared.
-static NODES: Mutex<Vec<NodeEntry>> = Mutex::new(Vec::new());
+/// The nodes declared; held while one is declared, so that two
+/// components opening at once get one node.
+static NODES: tokio::sync::Mutex<Vec<NodeEntry>> = tokio::sync::Mutex::const_new(Vec::new());
 
 impl RosNode {
     /// The node `name` in `domain` on `session`, declared (its liveliness
     /// token) on first use.
     pub async fn shared(session: &Session, domain: u32, name: &str) -> Result<Arc<RosNode>, BoxError> {
         let zid = session.zid().to_string();
-        let find = || {
-            let mut nodes = NODES.lock().unwrap_or_else(|e| e.into_inner());
-            nodes.retain(|(_, _, _, n)| n.strong_count() > 0);
-            nodes
-                .iter()
-                .find(|(z, d, n, _)| *z == zid && *d == domain && n == name)
-                .and_then(|e| e.3.upgrade())
-        };
-        if let Some(node) = find() {
+        let mut nodes = NODES.lock().await;
+        nodes.retain(|(_, _, _, n)| n.strong_count() > 0);
+        let found = nodes.iter().find(|(z, d, n, _)| *z == zid && *d == domain && n == name);
+        if let Some(node) = found.and_then(|e| e.3.upgrade()) {
             return Ok(node);
         }
         let name =
@@ -61,15 +57,6 @@ impl RosNode {
             next_entity: std::sync::atomic::AtomicU64::new(1),
             _token: token,
         });
-        let mut nodes = NODES.lock().unwrap_or_else(|e| e.into_inner());
-        // Two components may have raced here; the first one's node stays.
-        if let Some(first) = nodes
-            .iter()
-            .find(|(z, d, n, _)| *z == zid && *d == domain && *n == node.name.name)
-            .and_then(|e| e.3.upgrade())
-        {
-            return Ok(first);
-        }
         nodes.push((zid, domain, node.name.name.clone(), Arc::downgrade(&node)));
         Ok(node)
     }
