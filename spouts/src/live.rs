@@ -148,15 +148,7 @@ fn topic(what: &str, name: &str) -> Result<String, ParamError> {
 
 impl Link {
     fn from_params(p: LinkParams) -> Result<Link, ParamError> {
-        let node_ok = !p.node.is_empty()
-            && !p.node.starts_with(|c: char| c.is_ascii_digit())
-            && p.node.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
-        if !node_ok {
-            return Err(ParamError::new(format!(
-                "node: {:?} is not a ROS 2 node name (letters, digits, _)",
-                p.node
-            )));
-        }
+        rmw_zenoh::node_name(&p.node).map_err(|e| ParamError::new(format!("node: {e}")))?;
         Ok(Link {
             options: session_options(&p.listen, &p.connect, p.tls)?,
             format: p.format,

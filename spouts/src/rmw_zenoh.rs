@@ -70,15 +70,23 @@ pub struct NameError(pub String);
 /// qualified (a leading `/`).
 pub fn qualified(name: &str) -> Result<String, NameError> {
     let bare = name.strip_prefix('/').unwrap_or(name);
-    let token_ok = |t: &str| {
-        !t.is_empty()
-            && !t.starts_with(|c: char| c.is_ascii_digit())
-            && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-    };
-    if bare.is_empty() || !bare.split('/').all(token_ok) {
+    if bare.is_empty() || !bare.split('/').all(is_token) {
         return Err(NameError(name.to_string()));
     }
     Ok(format!("/{bare}"))
+}
+
+/// Checks a node name: one token (letters, digits and `_`, not starting
+/// with a digit).
+pub fn node_name(name: &str) -> Result<&str, NameError> {
+    if is_token(name) { Ok(name) } else { Err(NameError(name.to_string())) }
+}
+
+/// One token of a ROS 2 name.
+fn is_token(t: &str) -> bool {
+    !t.is_empty()
+        && !t.starts_with(|c: char| c.is_ascii_digit())
+        && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
 /// The key expression samples of `topic` (fully qualified) travel on:
@@ -270,6 +278,8 @@ mod tests {
         for bad in ["", "/", "a//b", "1scan", "sc an", "scan/"] {
             assert!(qualified(bad).is_err(), "{bad:?}");
         }
+        assert_eq!(node_name("squall_2"), Ok("squall_2"));
+        assert!(node_name("a/b").is_err() && node_name("").is_err());
     }
 
     #[test]
