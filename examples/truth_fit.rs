@@ -23,6 +23,12 @@
 //! that time lists every seventh point beyond 4 m: where it lies at the
 //! truth, its normal's direction, and the wall its ray meets.
 //!
+//! With `KIDNAP_AT=SECONDS` the robot is carried 5–20 m then, as
+//! `squall localize --kidnap-at` does; `CORRELATION` sets CGR's (default
+//! 20, the depth path's). Each row also says, at the truth and at the
+//! heaviest particle, how many points matched (m), how many fell short of
+//! the map (s) and the widest run of short points (w, metres).
+//!
 //! See docs/decisions/0026.
 
 use std::sync::Arc;
@@ -39,7 +45,7 @@ use squall_bolts::pf::model::{Injection, ParticleModel};
 use squall_core::depth_render::{DepthCamera, Props};
 use squall_core::geometry::normalize_angle;
 use squall_spouts::sim::people::Crowd;
-use squall_spouts::sim::{SimConfig, SimEvent, Simulation, Start, floor_for};
+use squall_spouts::sim::{Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for};
 
 /// Bins of the points' distance from the camera, metres.
 const BINS: [(f64, f64); 4] = [(0.0, 2.0), (2.0, 4.0), (4.0, 6.0), (6.0, 8.0)];
@@ -58,6 +64,7 @@ fn main() {
         leave_out_corners: true,
         newton_step: true,
         noise_per_r2: noise,
+        correlation: std::env::var("CORRELATION").map_or(20.0, |c| c.parse().unwrap()),
         ..CgrOptions::default()
     };
     let grid = Arc::new(SceneGrid::build(&world, 0.2, cgr.range, 2).unwrap());
@@ -76,6 +83,11 @@ fn main() {
         range_max: 8.0,
         beams: 2,
         start: Start::Drawn,
+        kidnap: std::env::var("KIDNAP_AT").ok().map(|k| Kidnap {
+            at_secs: k.parse().unwrap(),
+            min_m: 5.0,
+            max_m: 20.0,
+        }),
         ..SimConfig::default()
     };
     let mut crowd = Crowd::new(&floor, people, seed).unwrap();
@@ -165,6 +177,12 @@ fn main() {
             }
         }
         let heading = normalize_angle(best.theta - truth.theta).to_degrees();
+        let parts = |pose: &squall_core::geometry::Pose2| {
+            let lines = grid.lines_at(pose.x, pose.y).unwrap_or(&[]);
+            let e = evaluate(&world, lines, pose, &obs, &options.cgr);
+            format!("m{} s{} w{:.1}", e.matched, e.short, e.widest_short_run())
+        };
+        row = format!(" truth {} best {} |{row}", parts(&at_truth), parts(&at_best));
         println!(
             "{:5.1} {:6} {:3} {:6.3} {:8.2} {:8.1} {:7.1} |{row}",
             obs.stamp,

@@ -313,6 +313,10 @@ fn a_localization_study_scores_every_map_mode_and_seed_and_refuses_a_kidnap_afte
         assert!(run.is_file(), "{}", run.display());
     }
 
+    for row in &rows[1..] {
+        assert_eq!(row[column("lookalike")], "", "only a miss is tested for a look-alike: {row:?}");
+    }
+
     // A kidnapping after the run's end, or a map that is not there, stops
     // the study before anything runs.
     let late = ["study", "--maps", map, "--seeds", "1", "--duration", "5", "--kidnap-at", "8", "--out", "M"];
@@ -323,4 +327,41 @@ fn a_localization_study_scores_every_map_mode_and_seed_and_refuses_a_kidnap_afte
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("nowhere.txt"), "{}", text(&out.stderr));
     assert!(!dir.path().join("M").exists() && !dir.path().join("N").exists());
+}
+
+#[test]
+fn a_kidnapping_into_one_of_a_row_of_identical_offices_is_a_lookalike_miss() {
+    // CVAP6 seed 6: the laser robot is carried into an office whose
+    // neighbours, 9 m apart along the corridor, are drawn the same to a few
+    // centimetres; it turns in place there for the 5 s the study allows.
+    let dir = tempfile::tempdir().unwrap();
+    let map = shared_data("linemaps/CVAP6_vector.txt");
+    let args = [
+        "study",
+        "--maps",
+        map.to_str().unwrap(),
+        "--modes",
+        "kidnap",
+        "--seeds",
+        "6",
+        "--duration",
+        "20",
+        "--out",
+        "K",
+    ];
+    let out = squall(dir.path(), &args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let md = text(&out.stdout);
+    assert!(md.contains("| CVAP6 | laser | kidnap | 0/1 |") && md.contains("6: 3.38 (look-alike)"), "{md}");
+    let csv = std::fs::read_to_string(dir.path().join("K/study.csv")).unwrap();
+    let rows = csv_rows(&csv);
+    let column = |name: &str| rows[0].iter().position(|c| c == name).unwrap();
+    let row = &rows[1];
+    assert_eq!(row[column("lookalike")], "true", "{csv}");
+    assert_eq!(row[column("telling_frames")], "0", "{csv}");
+    // Wrong at the end of the 5 s after the carry at 8 s, by a whole office.
+    assert_eq!(row[column("wrong_at_s")].parse::<f64>().unwrap(), 13.0, "{csv}");
+    let by: f64 = row[column("wrong_by_m")].parse().unwrap();
+    assert!(by > 5.0, "{csv}");
+    assert_eq!(row[column("frames")], "50", "{csv}");
 }

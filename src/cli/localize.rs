@@ -216,7 +216,7 @@ fn overrides(args: &LocalizeArgs) -> Result<(Vec<Override>, Route), String> {
 
 /// The simulated laser's range, metres (the topology's `points` bolt
 /// reads as far).
-const RANGE_MAX: f64 = 8.0;
+pub(crate) const RANGE_MAX: f64 = 8.0;
 
 /// What the run's simulated robot will do, known before it starts (the
 /// simulator is deterministic per seed).

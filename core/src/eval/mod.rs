@@ -7,10 +7,13 @@
 //!   and relative pose error between consecutive poses.
 //! - [`map_frame`]: errors in the map's frame, with no alignment, and the
 //!   time to convergence: how a localizer is scored.
+//! - [`lookalike`]: whether a localizer's wrong place looked, to its
+//!   sensor, like the truth: a miss no localizer could have avoided.
 //!
 //! Each scores a [`Trajectory`](crate::trajectory::Trajectory).
 
 pub mod ground_truth;
+pub mod lookalike;
 pub mod map_frame;
 pub mod relations;
 

@@ -15,6 +15,14 @@
 //!   `--kidnap-at`; succeeds when found again within [`KIDNAP_WITHIN_S`]
 //!   and kept.
 
+use squall_core::depth_render::DepthCamera;
+use squall_core::eval::lookalike::{self, Fan, Lookalike};
+use squall_core::eval::map_frame::is_within;
+use squall_core::eval::relations::STAMP_TOLERANCE;
+use squall_core::geometry::Pose2;
+use squall_core::linemap::LineMap;
+use squall_core::trajectory::Trajectory;
+use squall_spouts::sim::SimConfig;
 use squall_topology::fsio::write_atomic;
 use std::ffi::OsString;
 use std::fmt::Write as _;
@@ -116,6 +124,9 @@ struct Row {
     error: String,
     scored: Option<Scored>,
     measured: Option<Measured>,
+    /// For a missed global start or kidnapping: whether the place it
+    /// settled in looked, to the sensor, like the robot's.
+    lookalike: Option<Lookalike>,
 }
 
 impl Row {
@@ -232,7 +243,7 @@ pub(super) fn study(plan: &Plan) -> ExitCode {
             (cell, job)
         })
         .collect();
-    let rows = run_all(&jobs, plan.jobs);
+    let rows = run_all(plan, &jobs);
     let md = markdown(plan, &cells, &rows);
     out!("{md}");
     let written = write_atomic(&plan.out.join("study.csv"), csv(plan, &rows).as_bytes())
@@ -254,21 +265,26 @@ pub(super) fn study(plan: &Plan) -> ExitCode {
 
 /// Runs every job, `threads` at once; returns the rows in the jobs'
 /// order.
-fn run_all(jobs: &[(Cell, Job)], threads: usize) -> Vec<Row> {
+fn run_all(plan: &Plan, jobs: &[(Cell, Job)]) -> Vec<Row> {
     let mut succeeded = 0;
     let refs: Vec<&Job> = jobs.iter().map(|(_, job)| job).collect();
-    run_pool(&refs, threads, |i, outcome, bar| {
+    run_pool(&refs, plan.jobs, |i, outcome, bar| {
         let (cell, job) = &jobs[i];
-        let row = row_of(*cell, job, outcome);
+        let mut row = row_of(*cell, job, outcome);
+        match lookalike_of(plan, &row, &job.dir) {
+            Ok(l) => row.lookalike = l,
+            Err(e) => row.error = format!("the look-alike test: {e}"),
+        }
         succeeded += usize::from(row.success());
         let line = match (&row.error, row.scored) {
             (e, _) if !e.is_empty() => format!("{}: failed: {e}", job.dir.display()),
             (_, Some(s)) => format!(
-                "{}: {} (mean {:.3} m{})",
+                "{}: {} (mean {:.3} m{}){}",
                 job.dir.display(),
                 if row.success() { "ok" } else { "missed" },
                 s.mean_m,
-                row.time_s().map_or(String::new(), |t| format!(", {t:.1} s"))
+                row.time_s().map_or(String::new(), |t| format!(", {t:.1} s")),
+                if row.lookalike.is_some_and(|l| l.is_lookalike()) { ", a look-alike place" } else { "" },
             ),
             (_, None) => format!("{}: no score", job.dir.display()),
         };
@@ -279,7 +295,8 @@ fn run_all(jobs: &[(Cell, Job)], threads: usize) -> Vec<Row> {
 
 /// The row of a finished run, scored from its `metrics.json`.
 fn row_of(cell: Cell, job: &Job, outcome: Result<Measured, String>) -> Row {
-    let mut row = Row { cell, seed: job.seed, error: String::new(), scored: None, measured: None };
+    let mut row =
+        Row { cell, seed: job.seed, error: String::new(), scored: None, measured: None, lookalike: None };
     match outcome {
         Err(e) => row.error = e,
         Ok(m) => {
@@ -295,6 +312,55 @@ fn row_of(cell: Cell, job: &Job, outcome: Result<Measured, String>) -> Row {
         }
     }
     row
+}
+
+/// The look-alike test of a missed global start or kidnapping
+/// ([`lookalike`]): over the frames from the start (global) or the carry
+/// (kidnap) to the time the estimate was wrong (the end of the time the
+/// mode allows, or the last wrong pose after it for a run that did not
+/// stay), did what the sensor would see from the truth and from the
+/// estimate's place differ? `None` for runs it does not apply to.
+fn lookalike_of(plan: &Plan, row: &Row, dir: &Path) -> Result<Option<Lookalike>, String> {
+    let (from, within) = match row.cell.mode {
+        _ if row.success() || row.scored.is_none() => return Ok(None),
+        Mode::Tracking => return Ok(None),
+        Mode::Global => (0.0, GLOBAL_WITHIN_S),
+        Mode::Kidnap => (plan.kidnap_at, KIDNAP_WITHIN_S),
+    };
+    let read = |file: &str| Trajectory::read_tum(&dir.join(file)).map_err(|e| e.to_string());
+    let (estimate, truth) = (read("trajectory.tum")?, read("ground_truth.tum")?);
+    let Some(to) = wrong_at(&estimate, &truth, from + within) else { return Ok(None) };
+    let map = LineMap::load(&plan.maps[row.cell.map]).map_err(|e| e.to_string())?;
+    Ok(lookalike::compare(&map, &fan(row.cell.sensor), &estimate, &truth, from, to))
+}
+
+/// When `estimate` was wrong (outside 0.2 m and 5° of `truth`): at its
+/// last pose by `end` if wrong there, else at its last wrong pose after
+/// `end`; `None` if neither.
+fn wrong_at(estimate: &Trajectory, truth: &Trajectory, end: f64) -> Option<f64> {
+    let wrong = |(&t, p): (&f64, &Pose2)| truth.at(t, STAMP_TOLERANCE).is_some_and(|g| !is_within(p, &g));
+    let poses = || estimate.stamps.iter().zip(&estimate.poses);
+    match poses().rfind(|(t, _)| **t <= end) {
+        Some(last) if wrong(last) => Some(*last.0),
+        _ => poses().rfind(|&(t, p)| *t > end && wrong((t, p))).map(|(t, _)| *t),
+    }
+}
+
+/// The simulated sensor's rays, as `squall localize --sim` sets it up.
+fn fan(sensor: Sensor) -> Fan {
+    match sensor {
+        Sensor::Laser => {
+            let c = SimConfig::default();
+            Fan::even(c.fov, c.beams, crate::cli::localize::RANGE_MAX, c.range_noise, 0.0)
+        }
+        Sensor::Depth => {
+            let camera = DepthCamera::d435_on_robot();
+            let fov = 2.0 * (camera.width as f64 / 2.0 / camera.intrinsics.fx).atan();
+            // A ray a degree.
+            let rays = fov.to_degrees().round() as usize + 1;
+            Fan::even(fov, rays, camera.noise.max_range, 0.0, camera.noise.sigma_per_z2)
+        }
+    }
 }
 
 /// The `localization` figures of a run's metrics.json.
@@ -321,14 +387,14 @@ fn read_score(path: &Path) -> Result<Scored, String> {
 /// One line per run.
 fn csv(plan: &Plan, rows: &[Row]) -> String {
     let mut out = String::from(
-        "map,sensor,mode,seed,success,mean_m,max_m,within_share,converged_after_s,carry_m,recovered_after_s,over_odometry_m,cpu_s,peak_rss_mb,error\n",
+        "map,sensor,mode,seed,success,mean_m,max_m,within_share,converged_after_s,carry_m,recovered_after_s,over_odometry_m,lookalike,wrong_at_s,wrong_by_m,telling_frames,frames,cpu_s,peak_rss_mb,error\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
     for r in rows {
-        let s = r.scored;
+        let (s, l) = (r.scored, r.lookalike);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
             name(&plan.maps[r.cell.map]),
             r.cell.sensor.name(),
             r.cell.mode.name(),
@@ -341,6 +407,11 @@ fn csv(plan: &Plan, rows: &[Row]) -> String {
             opt(s.and_then(|s| s.carry_m)),
             opt(s.and_then(|s| s.recovered_after_s)),
             opt(s.and_then(|s| s.over_odometry_m)),
+            l.map_or(String::new(), |l| l.is_lookalike().to_string()),
+            opt(l.map(|l| l.at)),
+            opt(l.map(|l| l.distance_m)),
+            l.map_or(String::new(), |l| l.telling_frames.to_string()),
+            l.map_or(String::new(), |l| l.frames.to_string()),
             opt(r.measured.as_ref().map(|m| m.cpu_secs)),
             opt(r.measured.as_ref().map(|m| m.peak_rss_mb)),
             r.error.replace('"', "'"),
@@ -358,7 +429,10 @@ fn markdown(plan: &Plan, cells: &[Cell], rows: &[Row]) -> String {
          stayed; kidnap (carried 5–20 m at {} s), found again within {KIDNAP_WITHIN_S} s and kept. Errors are \
          each run's mean position error in the map frame; times are to convergence (global) or recovery \
          (kidnap), over the runs that got there. Worse than odometry: the largest amount by which a run's \
-         position error exceeded the raw odometry's (started at the true start) at any pose.\n",
+         position error exceeded the raw odometry's (started at the true start) at any pose. A miss marked \
+         look-alike settled in a place the sensor could not tell from the robot's: from the start or the \
+         carry until the estimate was wrong, no frame's view of the map (its rays cast from the true path \
+         and from the same path carried onto the estimate) differed beyond the sensor's noise.\n",
         plan.kidnap_at
     );
     md.push_str("| map | sensor | mode | success | mean error median / worst (m) | time median / worst (s) | worse than odometry by, median / worst (m) | CPU median / worst (s) | missed (seed: mean m) |\n");
@@ -378,6 +452,9 @@ fn markdown(plan: &Plan, cells: &[Cell], rows: &[Row]) -> String {
             .iter()
             .filter(|r| !r.success())
             .map(|r| match r.scored {
+                Some(s) if r.lookalike.is_some_and(|l| l.is_lookalike()) => {
+                    format!("{}: {:.2} (look-alike)", r.seed, s.mean_m)
+                }
                 Some(s) => format!("{}: {:.2}", r.seed, s.mean_m),
                 None => format!("{}: failed", r.seed),
             })
@@ -405,7 +482,7 @@ mod tests {
 
     fn row(mode: Mode, scored: Scored) -> Row {
         let cell = Cell { map: 0, sensor: Sensor::Laser, mode };
-        Row { cell, seed: 1, error: String::new(), scored: Some(scored), measured: None }
+        Row { cell, seed: 1, error: String::new(), scored: Some(scored), measured: None, lookalike: None }
     }
 
     #[test]
@@ -422,6 +499,25 @@ mod tests {
         assert!(row(Mode::Kidnap, found).success());
         assert_eq!(row(Mode::Kidnap, found).time_s(), Some(4.0));
         assert!(!row(Mode::Kidnap, Scored { recovered_after_s: Some(6.0), ..Scored::default() }).success());
+    }
+
+    #[test]
+    fn a_miss_is_judged_where_the_estimate_was_wrong() {
+        let path = |wrong: &dyn Fn(f64) -> bool| {
+            let mut t = Trajectory::default();
+            for i in 0..=20 {
+                let s = f64::from(i);
+                t.push(s, Pose2::new(s + if wrong(s) { 5.0 } else { 0.0 }, 0.0, 0.0));
+            }
+            t
+        };
+        let truth = path(&|_| false);
+        // Wrong at the end of the time allowed: judged there.
+        assert_eq!(wrong_at(&path(&|s| s <= 10.0), &truth, 10.0), Some(10.0));
+        // Right then, wrong later (it did not stay): judged at the last wrong pose.
+        assert_eq!(wrong_at(&path(&|s| s < 4.0 || (12.0..=14.0).contains(&s)), &truth, 10.0), Some(14.0));
+        // Right from the end of the time allowed on: nothing to judge.
+        assert_eq!(wrong_at(&path(&|s| s < 4.0), &truth, 10.0), None);
     }
 
     #[test]
