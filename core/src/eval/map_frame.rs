@@ -105,9 +105,40 @@ pub fn worst_excess(estimate: &Trajectory, reference: &Trajectory, truth: &Traje
         .reduce(f64::max)
 }
 
+/// When `estimate` was wrong (outside [`WITHIN_M`] and [`WITHIN_DEG`] of
+/// `truth`): at its last pose by `end` if wrong there, else at its last
+/// wrong pose after `end`; `None` if neither. Where a localizer that
+/// missed its time (`end`: the time it was allowed) is judged.
+pub fn wrong_at(estimate: &Trajectory, truth: &Trajectory, end: f64) -> Option<f64> {
+    let pairs = super::common_stamps(estimate, truth);
+    match pairs.iter().rfind(|(t, _, _)| *t <= end) {
+        Some((t, p, g)) if !is_within(p, g) => Some(*t),
+        _ => pairs.iter().rfind(|(t, p, g)| *t > end && !is_within(p, g)).map(|(t, _, _)| *t),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_miss_is_judged_where_the_estimate_was_wrong() {
+        let path = |wrong: &dyn Fn(f64) -> bool| {
+            let mut t = Trajectory::default();
+            for i in 0..=20 {
+                let s = f64::from(i);
+                t.push(s, Pose2::new(s + if wrong(s) { 5.0 } else { 0.0 }, 0.0, 0.0));
+            }
+            t
+        };
+        let truth = path(&|_| false);
+        // Wrong at the end of the time allowed: judged there.
+        assert_eq!(wrong_at(&path(&|s| s <= 10.0), &truth, 10.0), Some(10.0));
+        // Right then, wrong later (it did not stay): judged at the last wrong pose.
+        assert_eq!(wrong_at(&path(&|s| s < 4.0 || (12.0..=14.0).contains(&s)), &truth, 10.0), Some(14.0));
+        // Right from the end of the time allowed on: nothing to judge.
+        assert_eq!(wrong_at(&path(&|s| s < 4.0), &truth, 10.0), None);
+    }
 
     /// A walk of 50 poses, 0.2 s apart.
     fn walk() -> Trajectory {

@@ -17,9 +17,7 @@
 
 use squall_core::depth_render::DepthCamera;
 use squall_core::eval::lookalike::{self, Fan, Lookalike};
-use squall_core::eval::map_frame::is_within;
-use squall_core::eval::relations::STAMP_TOLERANCE;
-use squall_core::geometry::Pose2;
+use squall_core::eval::map_frame::wrong_at;
 use squall_core::linemap::LineMap;
 use squall_core::trajectory::Trajectory;
 use squall_spouts::sim::SimConfig;
@@ -334,18 +332,6 @@ fn lookalike_of(plan: &Plan, row: &Row, dir: &Path) -> Result<Option<Lookalike>,
     Ok(lookalike::compare(&map, &fan(row.cell.sensor), &estimate, &truth, from, to))
 }
 
-/// When `estimate` was wrong (outside 0.2 m and 5° of `truth`): at its
-/// last pose by `end` if wrong there, else at its last wrong pose after
-/// `end`; `None` if neither.
-fn wrong_at(estimate: &Trajectory, truth: &Trajectory, end: f64) -> Option<f64> {
-    let wrong = |(&t, p): (&f64, &Pose2)| truth.at(t, STAMP_TOLERANCE).is_some_and(|g| !is_within(p, &g));
-    let poses = || estimate.stamps.iter().zip(&estimate.poses);
-    match poses().rfind(|(t, _)| **t <= end) {
-        Some(last) if wrong(last) => Some(*last.0),
-        _ => poses().rfind(|&(t, p)| *t > end && wrong((t, p))).map(|(t, _)| *t),
-    }
-}
-
 /// The simulated sensor's rays, as `squall localize --sim` sets it up.
 fn fan(sensor: Sensor) -> Fan {
     match sensor {
@@ -499,25 +485,6 @@ mod tests {
         assert!(row(Mode::Kidnap, found).success());
         assert_eq!(row(Mode::Kidnap, found).time_s(), Some(4.0));
         assert!(!row(Mode::Kidnap, Scored { recovered_after_s: Some(6.0), ..Scored::default() }).success());
-    }
-
-    #[test]
-    fn a_miss_is_judged_where_the_estimate_was_wrong() {
-        let path = |wrong: &dyn Fn(f64) -> bool| {
-            let mut t = Trajectory::default();
-            for i in 0..=20 {
-                let s = f64::from(i);
-                t.push(s, Pose2::new(s + if wrong(s) { 5.0 } else { 0.0 }, 0.0, 0.0));
-            }
-            t
-        };
-        let truth = path(&|_| false);
-        // Wrong at the end of the time allowed: judged there.
-        assert_eq!(wrong_at(&path(&|s| s <= 10.0), &truth, 10.0), Some(10.0));
-        // Right then, wrong later (it did not stay): judged at the last wrong pose.
-        assert_eq!(wrong_at(&path(&|s| s < 4.0 || (12.0..=14.0).contains(&s)), &truth, 10.0), Some(14.0));
-        // Right from the end of the time allowed on: nothing to judge.
-        assert_eq!(wrong_at(&path(&|s| s < 4.0), &truth, 10.0), None);
     }
 
     #[test]
