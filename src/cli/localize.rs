@@ -70,6 +70,8 @@ pub(super) struct LocalizeArgs {
     /// Output folder: trajectory.tum, ground_truth.tum, metrics.json.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    #[command(flatten)]
+    watch: super::watch::WatchArgs,
 }
 
 /// Particles a global start begins with: where the first reading fits
@@ -299,7 +301,9 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
     );
     let scorer = |dir: &Path| score(dir, &route);
     match report_invalid(spec) {
-        Ok(topology) => run::run_scored(&topology, Some(args.out.clone()), false, None, Some(&scorer)),
+        Ok(topology) => {
+            run::run_scored(&topology, Some(args.out.clone()), false, None, &args.watch, Some(&scorer))
+        }
         Err(code) => code,
     }
 }

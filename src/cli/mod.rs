@@ -29,6 +29,7 @@ mod speedup;
 mod study;
 #[cfg(feature = "cluster")]
 mod tls;
+mod watch;
 #[cfg(feature = "cluster")]
 mod worker;
 
@@ -97,6 +98,8 @@ enum Command {
         /// Run on the workers of this cluster file (cluster mode).
         #[arg(long, value_name = "CLUSTER.toml")]
         cluster: Option<PathBuf>,
+        #[command(flatten)]
+        watch: watch::WatchArgs,
     },
     /// Check a topology without running it.
     Validate {
@@ -157,8 +160,8 @@ pub(crate) fn main() -> ExitCode {
         }
     };
     match cli.command {
-        Command::Run { topology, out, quiet, cluster } => match load(&topology) {
-            Ok(t) => run::run(&t, out, quiet, cluster.as_deref()),
+        Command::Run { topology, out, quiet, cluster, watch } => match load(&topology) {
+            Ok(t) => run::run(&t, out, quiet, cluster.as_deref(), &watch),
             Err(code) => {
                 // An unusable --out is reported with the topology's errors.
                 if let Some(dir) = &out {

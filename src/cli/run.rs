@@ -7,6 +7,7 @@ use std::sync::Arc;
 use squall_topology::fsio::write_atomic;
 use squall_topology::{Progress, RunError, RunOptions, RunReport, StopRequest, Topology};
 
+use super::watch::{Watch, WatchArgs};
 use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay, writable_out};
 
 /// Scores a finished run from the files it wrote in the output folder:
@@ -20,8 +21,9 @@ pub(super) fn run(
     out: Option<PathBuf>,
     quiet: bool,
     cluster: Option<&Path>,
+    watch: &WatchArgs,
 ) -> ExitCode {
-    run_scored(topology, out, quiet, cluster, None)
+    run_scored(topology, out, quiet, cluster, watch, None)
 }
 
 /// [`run`], and when the run succeeded, `scorer`'s score of its outputs
@@ -31,6 +33,7 @@ pub(super) fn run_scored(
     out: Option<PathBuf>,
     quiet: bool,
     cluster: Option<&Path>,
+    watch: &WatchArgs,
     scorer: Option<Scorer>,
 ) -> ExitCode {
     // Everything a run in this process needs, checked before it starts and
@@ -48,11 +51,23 @@ pub(super) fn run_scored(
     if invalid {
         return ExitCode::from(EXIT_INVALID);
     }
+    let mut watching = match Watch::start(watch, out.as_deref()) {
+        Ok(w) => w,
+        Err(message) => {
+            eprintln!("error: {message}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
     let progress = Arc::new(Progress::default());
     // Counters only when something shows them: what spouts do for the
     // display (a log's scans counted ahead) is then left undone.
     let watched = ProgressDisplay::wanted().then(|| progress.clone());
-    let options = RunOptions { out_dir: out.clone(), progress: watched, ..RunOptions::default() };
+    let options = RunOptions {
+        out_dir: out.clone(),
+        progress: watched,
+        live: watching.live(),
+        ..RunOptions::default()
+    };
     stop_on_ctrl_c(options.stop.clone());
     let result = match cluster {
         None => {
@@ -77,9 +92,14 @@ pub(super) fn run_scored(
         Err((message, Some(report))) => (report, Some(message)),
         Err((message, None)) => {
             eprintln!("error: {message}");
+            watching.finish(&options.stop);
             return ExitCode::from(EXIT_FAILED);
         }
     };
+    if let Some(live) = watching.live() {
+        live.finish(&report);
+    }
+    watching.run_ended();
     if !quiet {
         out!("{report}");
     }
@@ -110,6 +130,7 @@ pub(super) fn run_scored(
         eprintln!("error: the run failed: {failure}");
         code = ExitCode::from(EXIT_FAILED);
     }
+    watching.finish(&options.stop);
     code
 }
 
@@ -148,12 +169,14 @@ fn on_cluster(
     ))
 }
 
-/// How a run ended, as metrics.json's `status` says: `completed` (the
-/// sources ended and everything was processed), `stopped` (Ctrl-C or
-/// SIGTERM: the sources were stopped early, everything they had sent was
-/// processed) or `failed` (with `error`: the counters are as they stood
-/// when the run was abandoned).
-enum Status {
+/// How a run stands, as metrics.json's `status` says: `running` (written
+/// while it goes, with `--metrics-every`), `completed` (the sources ended
+/// and everything was processed), `stopped` (Ctrl-C or SIGTERM: the
+/// sources were stopped early, everything they had sent was processed) or
+/// `failed` (with `error`: the counters are as they stood when the run was
+/// abandoned).
+pub(super) enum Status {
+    Running,
     Completed,
     Stopped,
     Failed(String),
@@ -161,7 +184,7 @@ enum Status {
 
 /// Writes metrics.json: the run's report, its status, and `score` under
 /// its key.
-fn write_metrics(
+pub(super) fn write_metrics(
     dir: &std::path::Path,
     report: &RunReport,
     score: Option<(&'static str, serde_json::Value)>,
@@ -170,6 +193,7 @@ fn write_metrics(
     let mut all = serde_json::to_value(report).map_err(std::io::Error::other)?;
     if let Some(fields) = all.as_object_mut() {
         let (name, error) = match status {
+            Status::Running => ("running", None),
             Status::Completed => ("completed", None),
             Status::Stopped => ("stopped", None),
             Status::Failed(message) => ("failed", Some(message)),

@@ -44,6 +44,8 @@ pub(super) struct SlamArgs {
     /// Run on the workers of this cluster file (cluster mode).
     #[arg(long, value_name = "CLUSTER.toml")]
     pub(super) cluster: Option<PathBuf>,
+    #[command(flatten)]
+    pub(super) watch: super::watch::WatchArgs,
 }
 
 fn quoted(s: &str) -> String {
@@ -122,7 +124,9 @@ pub(super) fn slam(args: &SlamArgs) -> ExitCode {
         }
     }
     match topology(args) {
-        Ok(topology) => run::run(&topology, Some(args.out.clone()), false, args.cluster.as_deref()),
+        Ok(topology) => {
+            run::run(&topology, Some(args.out.clone()), false, args.cluster.as_deref(), &args.watch)
+        }
         Err(code) => code,
     }
 }

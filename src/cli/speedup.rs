@@ -188,6 +188,7 @@ fn run_one(
         topology: None,
         overrides: Vec::new(),
         out: dir.to_path_buf(),
+        watch: Default::default(),
     };
     let topology =
         super::slam::topology(&slam).map_err(|_| (EXIT_INVALID, "invalid configuration".to_string()))?;

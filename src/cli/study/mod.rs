@@ -290,6 +290,7 @@ fn validate(args: &StudyArgs, simulated: &[worlds::World]) -> Result<Vec<Log>, S
             overrides: overrides.map_err(|e: squall_topology::OverrideError| e.to_string())?,
             out: args.out.clone(),
             cluster: None,
+            watch: Default::default(),
         };
         // Prints the topology's problems itself.
         super::slam::topology(&slam).map_err(|_| "the SLAM settings are invalid (see above)".to_string())?;

@@ -29,5 +29,8 @@ pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunEr
         .collect::<Vec<Vec<_>>>();
     runtime.shutdown_background();
     let report = build_report(topology, &outcomes, started.elapsed());
+    if let Some(live) = &options.live {
+        live.finish(&report);
+    }
     finish_run(topology, report, failure)
 }

@@ -38,6 +38,9 @@ pub struct RunOptions {
     /// then everything in flight is processed and every component finishes,
     /// as if the sources had ended (Ctrl-C in `squall run`).
     pub stop: Arc<StopRequest>,
+    /// Publish the tasks' counters while the run goes, for a live page,
+    /// a Prometheus scrape or a periodic metrics.json (none when absent).
+    pub live: Option<Arc<crate::live::LiveRun>>,
 }
 
 /// A request to end a run early (Ctrl-C, SIGTERM). Spouts are no longer
@@ -85,6 +88,7 @@ impl Default for RunOptions {
             progress: None,
             abort_grace: Duration::from_secs(5),
             stop: Arc::new(StopRequest::default()),
+            live: None,
         }
     }
 }

@@ -204,8 +204,12 @@ impl EdgeQueue {
         self.lock().max_depth
     }
 
+    /// The queue's bound.
+    pub(crate) fn capacity(&self) -> usize {
+        self.capacity
+    }
+
     /// Waiting + handed-over tuples now.
-    #[cfg(test)]
     pub(crate) fn depth(&self) -> usize {
         let s = self.lock();
         s.buf.len() + s.taken

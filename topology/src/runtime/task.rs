@@ -20,6 +20,7 @@ use tracing::warn;
 use crate::component::{Bolt, MessageId, Spout, SpoutStatus};
 use crate::context::TaskContext;
 use crate::error::BoxError;
+use crate::live::{DETAIL_PERIOD, TaskLive};
 use crate::metrics::TaskOutcome;
 use crate::params::Params;
 use crate::registry::{BoltFactory, SpoutFactory};
@@ -47,9 +48,37 @@ pub(crate) struct TaskCommon {
     pub(crate) emitter: Emitter,
     pub(crate) events: Sender<Event>,
     pub(crate) finished: bool,
+    /// Where the task publishes its counters while it runs, when the run
+    /// is watched.
+    pub(crate) live: Option<Arc<TaskLive>>,
+    /// When the task next publishes its percentiles and own metrics.
+    pub(crate) next_detail: Instant,
+    /// Whether counters changed since they were last published in detail.
+    pub(crate) detail_stale: bool,
 }
 
 impl TaskCommon {
+    /// Publishes the counters to a watched run: a store per counter, and
+    /// every [`DETAIL_PERIOD`] the percentiles and the component's own
+    /// metrics.
+    fn publish(&mut self, now: Instant) {
+        let Some(live) = &self.live else { return };
+        if now >= self.next_detail {
+            live.publish_detail(&self.emitter.stats);
+            self.next_detail = now + DETAIL_PERIOD;
+            self.detail_stale = false;
+        } else {
+            live.publish(&self.emitter.stats);
+            self.detail_stale = true;
+        }
+    }
+
+    /// When a task about to wait should wake to publish what it has not
+    /// yet published in detail (`None` when nothing waits).
+    fn detail_due(&self) -> Option<Instant> {
+        (self.live.is_some() && self.detail_stale).then_some(self.next_detail)
+    }
+
     fn report(&self, kind: EventKind) {
         // The coordinator outlives every task; a closed channel means it is
         // gone and there is nobody left to tell.
@@ -244,6 +273,10 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
         let mut clock = Instant::now();
         while let Some(tuple) = t.batch.pop_front() {
             clock = t.execute(bolt, tuple, clock).await?;
+            if clock >= t.common.next_detail {
+                // A batch of slow tuples still shows its progress.
+                t.common.publish(clock);
+            }
             if next_tick.is_some_and(|due| clock >= due) {
                 // A busy task still ticks, between tuples.
                 tick(bolt, t, &mut next_tick, clock, true).await?;
@@ -253,6 +286,7 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
                 t.park_batch();
             }
         }
+        t.common.publish(clock);
         t.release_batch();
         let stage = t.common.control.stage();
         if stage >= Stage::Abort {
@@ -279,7 +313,9 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
             signal.unpark();
             continue;
         }
-        match next_tick.filter(|_| stage < Stage::Drain) {
+        let due =
+            [next_tick.filter(|_| stage < Stage::Drain), t.common.detail_due()].into_iter().flatten().min();
+        match due {
             Some(due) => {
                 tokio::select! {
                     () = signal.wait() => {}
@@ -386,8 +422,10 @@ pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Res
             let blocked_before = t.common.emitter.stats.blocked;
             let start = Instant::now();
             let status = spout.next(&mut t.common.emitter).await?;
+            let end = Instant::now();
             let stats = &mut t.common.emitter.stats;
-            stats.busy += start.elapsed().saturating_sub(stats.blocked - blocked_before);
+            stats.busy += (end - start).saturating_sub(stats.blocked - blocked_before);
+            t.common.publish(end);
             let emitted = t.common.emitter.stats.emitted - before;
             if let Some(p) = &t.progress {
                 p.emitted.fetch_add(emitted, Ordering::Relaxed);
@@ -402,6 +440,9 @@ pub(crate) async fn run_spout<S: Spout>(spout: &mut S, t: &mut SpoutTask) -> Res
             t.common.report(EventKind::SpoutDone);
         } else if pending > 0 {
             let _ = tokio::time::timeout(ACK_POLL, signal.wait()).await;
+        } else if let Some(due) = t.common.detail_due() {
+            let _ = tokio::time::timeout_at(due.into(), signal.wait()).await;
+            t.common.publish(Instant::now());
         } else {
             signal.wait().await;
         }
@@ -468,6 +509,9 @@ fn supervise<T: HasCommon>(
             Incarnation::Panicked(panic) => format!("panicked: {panic}"),
         };
         let common = task.common();
+        if let Some(live) = &common.live {
+            live.failed_with(&failure);
+        }
         if common.control.stage() >= Stage::Abort {
             return None;
         }
@@ -546,6 +590,10 @@ fn finish_thread(
         common.report(EventKind::Failed(message));
     }
     common.emitter.stats.wall = started.elapsed();
+    if let Some(live) = &common.live {
+        live.publish_detail(&common.emitter.stats);
+        live.exit();
+    }
     let sum = |f: fn(&EdgeQueue) -> u64| inbox.iter().map(|q| f(q)).sum::<u64>();
     let outcome = TaskOutcome {
         stats: std::mem::take(&mut common.emitter.stats),

@@ -37,6 +37,7 @@ pub(crate) fn spawn_tasks(
     here: &dyn Fn(usize, usize) -> bool,
 ) -> std::io::Result<TaskThreads> {
     let mut threads: TaskThreads = Vec::new();
+    let live = options.live.as_ref().map(|l| l.attach(topology, &wiring.inboxes));
     for (c, planned) in topology.components.iter().enumerate() {
         let mut handles = Vec::new();
         for t in 0..planned.spec.parallelism {
@@ -51,6 +52,9 @@ pub(crate) fn spawn_tasks(
                 emitter: wiring.emitters[c][t].take().expect("each emitter used once"),
                 events: events.clone(),
                 finished: false,
+                live: live.as_ref().map(|slots| slots[c][t].clone()),
+                next_detail: Instant::now(),
+                detail_stale: false,
             };
             let handle = runtime.clone();
             let params = planned.params.clone();

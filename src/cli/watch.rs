@@ -1,0 +1,239 @@
+//! Watching a run while it goes, for `run`, `slam` and `localize`: the
+//! live page and Prometheus endpoint (`--ui`), `metrics.json` written
+//! periodically (`--metrics-every`), and a run log at INFO saying what
+//! each component is doing.
+
+use std::net::{SocketAddr, ToSocketAddrs};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use squall::ui::UiServer;
+use squall_topology::live::{LiveSample, Sampler};
+use squall_topology::{CustomMetric, LiveRun, RunReport, StopRequest};
+
+/// How often the run log speaks.
+const LOG_PERIOD: Duration = Duration::from_secs(5);
+
+/// The flags that watch a run.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub(super) struct WatchArgs {
+    /// Serve a live page of the run (the topology, and per component and
+    /// task: rates, execute latency, queues, drops, busy time, errors) and
+    /// its Prometheus metrics at /metrics, on HOST:PORT (e.g.
+    /// 127.0.0.1:8080; port 0 picks a free one, printed at start).
+    #[arg(long, value_name = "HOST:PORT", value_parser = parse_addr)]
+    pub(super) ui: Option<SocketAddr>,
+    /// Keep the live page up this many seconds after the run ends
+    /// (Ctrl-C ends the wait).
+    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = parse_secs, requires = "ui")]
+    pub(super) ui_linger: f64,
+    /// Also write metrics.json every SECS while the run goes (atomically,
+    /// with "status": "running"); needs an output folder.
+    #[arg(long, value_name = "SECS", value_parser = parse_period)]
+    pub(super) metrics_every: Option<f64>,
+}
+
+fn parse_addr(s: &str) -> Result<SocketAddr, String> {
+    let mut addrs =
+        s.to_socket_addrs().map_err(|e| format!("expected HOST:PORT, e.g. 127.0.0.1:8080 ({e})"))?;
+    addrs.next().ok_or_else(|| format!("{s} names no address"))
+}
+
+fn parse_secs(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err("expected a number of seconds, 0 or more".into()),
+    }
+}
+
+fn parse_period(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.1 => Ok(v),
+        _ => Err("expected a number of seconds, 0.1 or more".into()),
+    }
+}
+
+/// What watches one run; [`finish`](Self::finish) it when the run has
+/// ended.
+pub(super) struct Watch {
+    live: Option<Arc<LiveRun>>,
+    ui: Option<UiServer>,
+    linger: Duration,
+    stop: Option<mpsc::Sender<()>>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl Watch {
+    /// Starts what `args` ask for; an address that cannot be served, or
+    /// `--metrics-every` without an output folder, is an error (exit 2).
+    pub(super) fn start(args: &WatchArgs, out: Option<&Path>) -> Result<Watch, String> {
+        let logging = tracing::enabled!(tracing::Level::INFO);
+        let wanted = args.ui.is_some() || args.metrics_every.is_some() || logging;
+        let mut watch = Watch {
+            live: wanted.then(LiveRun::new),
+            ui: None,
+            linger: Duration::from_secs_f64(args.ui_linger),
+            stop: None,
+            threads: Vec::new(),
+        };
+        let Some(live) = watch.live.clone() else { return Ok(watch) };
+        if let Some(addr) = args.ui {
+            let server = UiServer::start(addr, live.clone()).map_err(|e| format!("--ui {addr}: {e}"))?;
+            if !server.addr().ip().is_loopback() {
+                eprintln!(
+                    "warning: the live page at {} is open to anyone who can reach this host (it shows \
+                     the run's topology and counters, read-only)",
+                    server.addr()
+                );
+            }
+            eprintln!("live page: http://{}/ (Prometheus metrics at /metrics)", server.addr());
+            watch.ui = Some(server);
+        }
+        let (stop, stopped) = mpsc::channel::<()>();
+        let mut every: Vec<Periodic> = Vec::new();
+        if let Some(secs) = args.metrics_every {
+            let Some(dir) = out else {
+                return Err("--metrics-every needs an output folder (--out) to write metrics.json in".into());
+            };
+            let dir = dir.to_path_buf();
+            every.push(Periodic {
+                period: Duration::from_secs_f64(secs),
+                at_end: false,
+                action: Box::new(move |s| write_running(&dir, &s.snapshot.report)),
+            });
+        }
+        if logging {
+            every.push(Periodic {
+                period: LOG_PERIOD,
+                at_end: true,
+                action: Box::new(|s| tracing::info!("{}", log_line(s))),
+            });
+        }
+        if !every.is_empty() {
+            watch.threads.push(std::thread::spawn(move || periodically(&live, &stopped, every)));
+        }
+        watch.stop = Some(stop);
+        Ok(watch)
+    }
+
+    /// The run to hand to the runtime, when anything watches it.
+    pub(super) fn live(&self) -> Option<Arc<LiveRun>> {
+        self.live.clone()
+    }
+
+    /// Stops the periodic writers (before the final metrics.json is
+    /// written, which they must not overwrite).
+    pub(super) fn run_ended(&mut self) {
+        self.stop.take();
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+
+    /// Keeps the live page up for `--ui-linger` (or until Ctrl-C), then
+    /// stops it.
+    pub(super) fn finish(mut self, stop: &StopRequest) {
+        self.run_ended();
+        let Some(ui) = self.ui.take() else { return };
+        if !self.linger.is_zero() && !stop.is_made() {
+            eprintln!(
+                "the live page stays up at http://{}/ for {:.0} s (Ctrl-C ends it)",
+                ui.addr(),
+                self.linger.as_secs_f64()
+            );
+            let until = Instant::now() + self.linger;
+            while Instant::now() < until && !stop.is_made() {
+                std::thread::sleep(
+                    Duration::from_millis(50).min(until.saturating_duration_since(Instant::now())),
+                );
+            }
+        }
+        ui.stop();
+    }
+}
+
+/// Something done with a sample of the run every `period`.
+struct Periodic {
+    period: Duration,
+    /// Done once more when the run has ended.
+    at_end: bool,
+    action: Box<dyn FnMut(&LiveSample) + Send>,
+}
+
+/// Runs each action on a sample of `live` every period until `stopped`
+/// says so.
+fn periodically(live: &Arc<LiveRun>, stopped: &mpsc::Receiver<()>, mut every: Vec<Periodic>) {
+    // A sampler per action: its rates are over the action's own period.
+    let mut samplers: Vec<Sampler> = every.iter().map(|_| Sampler::new(live.clone())).collect();
+    for s in &mut samplers {
+        s.sample();
+    }
+    let start = Instant::now();
+    let mut due: Vec<Instant> = every.iter().map(|p| start + p.period).collect();
+    loop {
+        let next = due.iter().min().copied().unwrap_or(start);
+        let ended = !matches!(
+            stopped.recv_timeout(next.saturating_duration_since(Instant::now())),
+            Err(RecvTimeoutError::Timeout)
+        );
+        let now = Instant::now();
+        for ((p, due), sampler) in every.iter_mut().zip(&mut due).zip(&mut samplers) {
+            if (ended && p.at_end) || (!ended && now >= *due) {
+                if let Some(sample) = sampler.sample() {
+                    (p.action)(&sample);
+                }
+                *due = now + p.period;
+            }
+        }
+        if ended {
+            return;
+        }
+    }
+}
+
+/// Writes a running run's metrics.json; an error is logged (the final
+/// write reports its own).
+fn write_running(dir: &Path, report: &RunReport) {
+    if let Err(e) = super::run::write_metrics(dir, report, None, &super::run::Status::Running) {
+        tracing::warn!("cannot write {}: {e}", PathBuf::from(dir).join("metrics.json").display());
+    }
+}
+
+/// `12 s: src 10/s out; matcher ×2 10/s in, busy 83%; resampler 10/s in,
+/// busy 4%, resamplings 9`: per component its rate, how busy its tasks
+/// are, and the counters it keeps itself.
+fn log_line(s: &LiveSample) -> String {
+    let mut parts = Vec::new();
+    for (i, c) in s.snapshot.report.components.iter().enumerate() {
+        let rates = s.rates.get(i).map(Vec::as_slice).unwrap_or(&[]);
+        let n = rates.len().max(1) as f64;
+        let tasks = if c.tasks > 1 { format!(" ×{}", c.tasks) } else { String::new() };
+        let mut part = if c.role == squall_topology::spec::Role::Spout {
+            format!("{}{tasks} {:.0}/s out", c.name, rates.iter().map(|r| r.out_per_s).sum::<f64>())
+        } else {
+            format!(
+                "{}{tasks} {:.0}/s in, busy {:.0}%",
+                c.name,
+                rates.iter().map(|r| r.in_per_s).sum::<f64>(),
+                rates.iter().map(|r| r.busy_pct).sum::<f64>() / n
+            )
+        };
+        if c.dropped > 0 {
+            part.push_str(&format!(", {} dropped", c.dropped));
+        }
+        for (k, v) in &c.custom {
+            if let CustomMetric::Counter(v) = v {
+                part.push_str(&format!(", {k} {v}"));
+            }
+        }
+        parts.push(part);
+    }
+    if s.snapshot.ended {
+        format!("ended after {:.1} s: {}", s.snapshot.report.wall_secs, parts.join("; "))
+    } else {
+        format!("{:.0} s: {}", s.snapshot.elapsed_secs, parts.join("; "))
+    }
+}

@@ -1,0 +1,222 @@
+//! Watching a run while it goes: the live page in headless Chromium, the
+//! Prometheus endpoint scraped twice, metrics.json written while running,
+//! the run log, and the flags' errors.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+mod common;
+
+use common::{finish_within, wait_for};
+
+fn out_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("squall-watch-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `squall run` of the probe at 10 000 tuples/s for `seconds`, with the
+/// live page on a free port, its stderr into `dir/stderr`.
+fn probe(dir: &Path, seconds: u64, extra: &[&str], log: &str) -> Child {
+    let count = format!("source.params.count={}", seconds * 10_000);
+    Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["run", "examples/topologies/probe.toml", "--quiet", "--set", &count])
+        .args(["--set", "source.params.rate_hz=10000", "--ui", "127.0.0.1:0"])
+        .args(extra)
+        .env("SQUALL_LOG", log)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
+        .spawn()
+        .unwrap()
+}
+
+fn stderr(dir: &Path) -> String {
+    std::fs::read_to_string(dir.join("stderr")).unwrap_or_default()
+}
+
+/// The live page's address, once the run has printed it.
+fn page_addr(dir: &Path) -> String {
+    let addr = || {
+        stderr(dir).lines().find_map(|l| {
+            l.strip_prefix("live page: http://").and_then(|rest| rest.split('/').next()).map(str::to_string)
+        })
+    };
+    wait_for("the live page's address", Duration::from_secs(30), || addr().is_some(), || stderr(dir));
+    addr().unwrap()
+}
+
+/// GET `path` from `addr`: (status line, body).
+fn get(addr: &str, path: &str) -> (String, String) {
+    let mut stream = TcpStream::connect(addr).expect("the live page accepts connections");
+    write!(stream, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).unwrap();
+    let (head, body) = response.split_once("\r\n\r\n").expect("an HTTP response");
+    (head.lines().next().unwrap_or_default().to_string(), body.to_string())
+}
+
+/// The value of the sample `name{labels}` in a Prometheus exposition.
+fn sample(text: &str, name_and_labels: &str) -> Option<f64> {
+    text.lines().find_map(|l| l.strip_prefix(name_and_labels)?.trim().parse().ok())
+}
+
+/// Ends a lingering run as Ctrl-C would; it exits 0.
+fn interrupt(child: Child, dir: &Path) {
+    // SAFETY: sending a signal to our own child process.
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGINT);
+    }
+    let out = finish_within(child, Duration::from_secs(30), || stderr(dir));
+    assert!(out.status.success(), "{:?}\n{}", out.status, stderr(dir));
+}
+
+#[test]
+fn prometheus_counters_grow_while_the_run_goes_and_metrics_json_is_written_running() {
+    let dir = out_dir("prometheus");
+    let out = dir.join("out");
+    let out_arg = out.to_str().unwrap();
+    let child = probe(
+        &dir,
+        6,
+        &["--ui-linger", "60", "--metrics-every", "0.5", "--out", out_arg],
+        "warn,squall::cli::watch=info",
+    );
+    let addr = page_addr(&dir);
+    let sink = r#"squall_tuples_received_total{component="sink",task="0"}"#;
+    let ended = r#"squall_run_ended{topology="probe"}"#;
+    let scrape = || {
+        let (status, body) = get(&addr, "/metrics");
+        assert!(status.contains("200"), "{status}");
+        body
+    };
+    // First scrape: the run going, the sink counting.
+    let mut first = 0.0;
+    wait_for(
+        "a scrape while the sink counts",
+        Duration::from_secs(30),
+        || {
+            let text = scrape();
+            first = sample(&text, sink).unwrap_or(0.0);
+            sample(&text, ended) == Some(0.0) && first > 0.0
+        },
+        scrape,
+    );
+    // Second: more.
+    wait_for(
+        "the sink's count to grow",
+        Duration::from_secs(30),
+        || sample(&scrape(), sink) > Some(first),
+        scrape,
+    );
+    assert!(scrape().contains("# TYPE squall_queue_depth gauge"));
+    // metrics.json while running.
+    let metrics = out.join("metrics.json");
+    let read = || -> Option<serde_json::Value> {
+        serde_json::from_str(&std::fs::read_to_string(&metrics).ok()?).ok()
+    };
+    wait_for(
+        "metrics.json written while running",
+        Duration::from_secs(30),
+        || read().is_some_and(|m| m["status"] == "running"),
+        || format!("{:?}", read()),
+    );
+    // The end: every tuple counted, the final metrics.json, the page still up.
+    wait_for(
+        "the run's end",
+        Duration::from_secs(60),
+        || sample(&scrape(), ended) == Some(1.0),
+        || stderr(&dir),
+    );
+    assert_eq!(sample(&scrape(), sink), Some(60_000.0));
+    // The final metrics.json follows the run's end (the page stays up).
+    wait_for(
+        "the final metrics.json",
+        Duration::from_secs(30),
+        || read().is_some_and(|m| m["status"] == "completed"),
+        || format!("{:?}", read()),
+    );
+    assert_eq!(read().unwrap()["components"][2]["received"], 60_000);
+    let (status, body) = get(&addr, "/api/run");
+    assert!(status.contains("200"));
+    let api: serde_json::Value = serde_json::from_str(&body).unwrap();
+    wait_for(
+        "the page's sample of the end",
+        Duration::from_secs(10),
+        || serde_json::from_str::<serde_json::Value>(&get(&addr, "/api/run").1).unwrap()["ended"] == true,
+        || body.clone(),
+    );
+    assert_eq!(api["graph"].as_array().unwrap().len(), 2);
+    // The run log spoke at INFO (every 5 s, and at the end), naming each
+    // component's rate.
+    let log = stderr(&dir);
+    assert!(
+        log.lines()
+            .any(|l| l.contains("ended after") && l.contains("s: source") && l.contains("/s out; relay")),
+        "{log}"
+    );
+    interrupt(child, &dir);
+}
+
+#[test]
+fn the_live_page_shows_numbers_changing_in_headless_chromium() {
+    let check = Command::new("python3").args(["-c", "import websockets"]).output();
+    assert!(
+        check.is_ok_and(|o| o.status.success()),
+        "this test needs python3 with websockets and Debian's chromium (see .ci/run)"
+    );
+    let dir = out_dir("page");
+    let child = probe(&dir, 8, &["--ui-linger", "60"], "warn");
+    let url = format!("http://{}/", page_addr(&dir));
+    // Under the test's output, for a person to look at.
+    let screenshot = Path::new(env!("CARGO_TARGET_TMPDIR")).join("live-page.png");
+    let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/live_page.py");
+    let browser = Command::new("python3")
+        .arg(client)
+        .args([url.as_str(), screenshot.to_str().unwrap(), "source", "relay", "sink"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let seen = finish_within(browser, Duration::from_secs(90), || stderr(&dir));
+    assert!(
+        seen.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&seen.stdout),
+        String::from_utf8_lossy(&seen.stderr)
+    );
+    let read: serde_json::Value = serde_json::from_slice(&seen.stdout).unwrap();
+    assert_eq!(read["then"]["status"], "running");
+    assert_eq!(read["then"]["edges"], 2);
+    assert!(std::fs::metadata(&screenshot).unwrap().len() > 10_000, "a screenshot of the page");
+    interrupt(child, &dir);
+}
+
+#[test]
+fn watching_flags_that_cannot_work_are_refused_before_the_run() {
+    let squall = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_squall"))
+            .args(["run", "examples/topologies/wordcount.toml", "--quiet"])
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap()
+    };
+    let refused = |args: &[&str], says: &str| {
+        let out = squall(args);
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    };
+    refused(&["--metrics-every", "1"], "--metrics-every needs an output folder");
+    refused(&["--metrics-every", "0"], "0.1 or more");
+    refused(&["--ui-linger", "5"], "--ui");
+    refused(&["--ui", "nowhere"], "expected HOST:PORT");
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = taken.local_addr().unwrap().to_string();
+    refused(&["--ui", &addr], &format!("--ui {addr}"));
+}
