@@ -1,6 +1,8 @@
 //! Watching a run while it goes: the live page in headless Chromium, the
-//! Prometheus endpoint scraped twice, metrics.json written while running,
-//! the run log, and the flags' errors.
+//! Prometheus endpoint scraped twice, the Foxglove view live (read by an
+//! independent client of its WebSocket protocol) and recorded (read back
+//! with the `mcap` package), metrics.json written while running, the run
+//! log, and the flags' errors.
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
@@ -10,7 +12,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{finish_within, wait_for};
+use common::{finish_within, shared_data, wait_for};
 
 fn out_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("squall-watch-{}-{name}", std::process::id()));
@@ -196,6 +198,88 @@ fn the_live_page_shows_numbers_changing_in_headless_chromium() {
     interrupt(child, &dir);
 }
 
+/// `tests/clients/foxglove_check.py ARGS`'s JSON: topic → {schema,
+/// encoding, messages, bytes}.
+fn foxglove_check(args: &[&str], context: impl FnOnce() -> String) -> serde_json::Value {
+    let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/foxglove_check.py");
+    let child = Command::new("python3")
+        .arg(client)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = finish_within(child, Duration::from_secs(90), context);
+    assert!(
+        out.status.success(),
+        "{args:?}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn the_foxglove_view_goes_live_and_into_an_mcap_file_with_every_reading() {
+    let check = Command::new("python3").args(["-c", "import websockets, mcap"]).output();
+    assert!(
+        check.is_ok_and(|o| o.status.success()),
+        "this test needs python3 with websockets and mcap (see .ci/run for the pinned versions)"
+    );
+    let dir = out_dir("foxglove");
+    let (out, mcap) = (dir.join("out"), dir.join("run.mcap"));
+    // 300 scans of ACES at 5 times their recorded rate: about 10 s, time
+    // for a client to join while the run goes.
+    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["slam", "--log", &shared_data("laser/aces.clf"), "--max-scans", "300"])
+        .args(["--set", "source.params.rate=5", "--foxglove", "127.0.0.1:0", "--ui-linger", "60"])
+        .args(["--record", mcap.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .env("SQUALL_LOG", "warn")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
+        .spawn()
+        .unwrap();
+    let url = || {
+        stderr(&dir)
+            .lines()
+            .find_map(|l| Some(l.strip_prefix("Foxglove live view: ")?.split(' ').next()?.to_string()))
+    };
+    wait_for("the Foxglove view's address", Duration::from_secs(30), || url().is_some(), || stderr(&dir));
+    let topics = ["/scan", "/map", "/pose", "/particles", "/tf", "/squall/metrics"];
+    let url = url().unwrap();
+    let mut args = vec!["live", url.as_str()];
+    args.extend(topics);
+    let live = foxglove_check(&args, || stderr(&dir));
+    for (topic, schema) in [
+        ("/scan", "foxglove.LaserScan"),
+        ("/map", "foxglove.Grid"),
+        ("/pose", "foxglove.PoseInFrame"),
+        ("/particles", "foxglove.PosesInFrame"),
+        ("/tf", "foxglove.FrameTransforms"),
+    ] {
+        assert_eq!(live[topic]["schema"], schema, "{live}");
+        assert!(live[topic]["messages"].as_u64() > Some(0), "{live}");
+    }
+    // The run's end (the views linger), then the recording.
+    wait_for("the run's end", Duration::from_secs(120), || stderr(&dir).contains("stay up"), || stderr(&dir));
+    interrupt(child, &dir);
+    let recorded = foxglove_check(&["mcap", mcap.to_str().unwrap()], || stderr(&dir));
+    let poses = std::fs::read_to_string(out.join("trajectory.tum")).unwrap();
+    let scans = poses.lines().filter(|l| !l.starts_with('#')).count() as u64;
+    assert_eq!(scans, 300);
+    // Every scan read, and every pose estimated, is in the file.
+    assert_eq!(recorded["/scan"]["messages"], scans, "{recorded}");
+    assert_eq!(recorded["/pose"]["messages"], scans, "{recorded}");
+    assert_eq!(recorded["/scan"]["schema"], "foxglove.LaserScan");
+    assert_eq!(recorded["/map"]["schema"], "foxglove.Grid");
+    assert!(recorded["/map"]["messages"].as_u64() >= Some(1), "{recorded}");
+    // odom → base_link for every scan, map → odom for every estimate.
+    assert_eq!(recorded["/tf"]["messages"], 2 * scans, "{recorded}");
+    assert!(recorded["/squall/metrics"]["messages"].as_u64() >= Some(9), "{recorded}");
+    assert!(!dir.read_dir().unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial")));
+}
+
 #[test]
 fn watching_flags_that_cannot_work_are_refused_before_the_run() {
     let squall = |args: &[&str]| {
@@ -214,7 +298,10 @@ fn watching_flags_that_cannot_work_are_refused_before_the_run() {
     };
     refused(&["--metrics-every", "1"], "--metrics-every needs an output folder");
     refused(&["--metrics-every", "0"], "0.1 or more");
-    refused(&["--ui-linger", "5"], "--ui");
+    refused(&["--ui-linger", "5"], "--ui-linger keeps --ui or --foxglove up");
+    refused(&["--foxglove", "8765"], "expected HOST:PORT");
+    refused(&["--record", "/proc/run.mcap"], "--record /proc/run.mcap: cannot write there");
+    refused(&["--record", "/tmp"], "is a folder");
     refused(&["--ui", "nowhere"], "expected HOST:PORT");
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = taken.local_addr().unwrap().to_string();

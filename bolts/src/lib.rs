@@ -10,6 +10,7 @@ pub mod parfil;
 pub mod pf;
 pub mod sinks;
 pub mod slam;
+pub mod view;
 
 use squall_topology::Registry;
 
@@ -23,4 +24,5 @@ pub fn register(r: &mut Registry) {
     parfil::register(r);
     cgr::register(r);
     sinks::register(r);
+    view::register(r);
 }

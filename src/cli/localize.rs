@@ -293,12 +293,26 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let spec = Topology::from_text(
-        "localize.toml (built in)",
-        LOCALIZE_TOML,
-        &overrides,
-        &squall::builtin::registry(),
-    );
+    let mut text = LOCALIZE_TOML.to_string();
+    if args.watch.viewed() {
+        // The view: the line map, what the sensor saw (the scan, and the
+        // points matched), the estimate (placing map → odom), the
+        // particles, the hypotheses and the simulator's truth.
+        let mut inputs = vec![
+            ("points", "default"),
+            ("resampler", "pose"),
+            ("resampler", "particles"),
+            ("resampler", "hypotheses"),
+            ("source", "truth"),
+        ];
+        if args.input == "laser" {
+            inputs.push(("source", "scan"));
+        }
+        let map = args.map.to_string_lossy();
+        text.push_str(&super::watch::view_bolt(&inputs, &format!("line_map = {}", quoted(&map))));
+    }
+    let spec =
+        Topology::from_text("localize.toml (built in)", &text, &overrides, &squall::builtin::registry());
     let scorer = |dir: &Path| score(dir, &route);
     match report_invalid(spec) {
         Ok(topology) => {

@@ -99,11 +99,14 @@ pub(super) fn run_scored(
     if let Some(live) = watching.live() {
         live.finish(&report);
     }
-    watching.run_ended();
+    let mut code = ExitCode::SUCCESS;
+    if let Err(message) = watching.run_ended() {
+        eprintln!("error: {message}");
+        code = ExitCode::from(EXIT_FAILED);
+    }
     if !quiet {
         out!("{report}");
     }
-    let mut code = ExitCode::SUCCESS;
     let score = match (&out, scorer, &failure) {
         (Some(dir), Some(scorer), None) => match scorer(dir) {
             Ok(score) => Some(score),

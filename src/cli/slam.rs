@@ -76,6 +76,12 @@ fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
     if let Some(p) = args.particles {
         sets.push(format!("matcher.params.particles={p}"));
     }
+    if args.watch.viewed() && args.topology.is_none() {
+        // The view shows the map as it grows: the best particle's every
+        // tenth correction (the view publishes at most one a second of
+        // the log's clock).
+        sets.push("matcher.params.map_interval=10".into());
+    }
     if let Some(c) = &args.cutoff {
         let value = if c == "none" { quoted("none") } else { c.clone() };
         sets.push(format!("matcher.params.cutoff={value}"));
@@ -102,7 +108,20 @@ pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
     let spec = match &args.topology {
         Some(file) => Topology::load(file, &overrides, &squall::builtin::registry()),
         None => {
-            Topology::from_text("slam.toml (built in)", SLAM_TOML, &overrides, &squall::builtin::registry())
+            let mut text = SLAM_TOML.to_string();
+            if args.watch.viewed() {
+                // The view: scans, the live estimate (placing map → odom),
+                // the particles, the map and the corrected trajectory.
+                let inputs = [
+                    ("source", "scan"),
+                    ("resampler", "pose"),
+                    ("resampler", "particles"),
+                    ("backend", "map"),
+                    ("backend", "trajectory"),
+                ];
+                text.push_str(&super::watch::view_bolt(&inputs, ""));
+            }
+            Topology::from_text("slam.toml (built in)", &text, &overrides, &squall::builtin::registry())
         }
     };
     report_invalid(spec)

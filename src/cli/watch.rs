@@ -1,5 +1,6 @@
 //! Watching a run while it goes, for `run`, `slam` and `localize`: the
-//! live page and Prometheus endpoint (`--ui`), `metrics.json` written
+//! live page and Prometheus endpoint (`--ui`), the Foxglove view, live
+//! (`--foxglove`) and recorded (`--record`), `metrics.json` written
 //! periodically (`--metrics-every`), and a run log at INFO saying what
 //! each component is doing.
 
@@ -10,12 +11,15 @@ use std::sync::mpsc::{self, RecvTimeoutError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use squall::bolts::view::{self, Recording};
 use squall::ui::UiServer;
 use squall_topology::live::{LiveSample, Sampler};
 use squall_topology::{CustomMetric, LiveRun, RunReport, StopRequest};
 
 /// How often the run log speaks.
 const LOG_PERIOD: Duration = Duration::from_secs(5);
+/// How often the Foxglove view gets every component's metrics.
+const METRICS_PERIOD: Duration = Duration::from_secs(1);
 
 /// The flags that watch a run.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -26,20 +30,78 @@ pub(super) struct WatchArgs {
     /// 127.0.0.1:8080; port 0 picks a free one, printed at start).
     #[arg(long, value_name = "HOST:PORT", value_parser = parse_addr)]
     pub(super) ui: Option<SocketAddr>,
-    /// Keep the live page up this many seconds after the run ends
-    /// (Ctrl-C ends the wait).
-    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = parse_secs, requires = "ui")]
+    /// Keep the live page and the Foxglove view up this many seconds
+    /// after the run ends (Ctrl-C ends the wait).
+    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = parse_secs)]
     pub(super) ui_linger: f64,
+    /// Serve a live view for Foxglove (its WebSocket protocol) on
+    /// HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one): the map,
+    /// scans, poses, particles and transforms of `slam` and `localize`,
+    /// whatever a topology's `sink.foxglove` publishes, and every
+    /// component's metrics each second.
+    #[arg(long, value_name = "HOST:PORT", value_parser = parse_host_port)]
+    pub(super) foxglove: Option<(String, u16)>,
+    /// Record the same channels into an MCAP file that Foxglove opens
+    /// (written atomically when the run ends).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub(super) record: Option<PathBuf>,
     /// Also write metrics.json every SECS while the run goes (atomically,
     /// with "status": "running"); needs an output folder.
     #[arg(long, value_name = "SECS", value_parser = parse_period)]
     pub(super) metrics_every: Option<f64>,
 }
 
+impl WatchArgs {
+    /// Whether a Foxglove view is wanted (live or recorded): the built-in
+    /// topologies then add their `sink.foxglove`.
+    pub(super) fn viewed(&self) -> bool {
+        self.foxglove.is_some() || self.record.is_some()
+    }
+}
+
+/// A `sink.foxglove` bolt named `view` subscribed to `inputs`
+/// (component, stream), with `params` (TOML inline-table entries), to
+/// append to a built-in topology.
+pub(super) fn view_bolt(inputs: &[(&str, &str)], params: &str) -> String {
+    let inputs: Vec<String> = inputs
+        .iter()
+        .map(|(from, stream)| format!("  {{ from = \"{from}\", stream = \"{stream}\" }},"))
+        .collect();
+    format!(
+        "\n[[bolt]]\nname = \"view\"\nkind = \"sink.foxglove\"\nparams = {{ {params} }}\ninputs = [\n{}\n]\n",
+        inputs.join("\n")
+    )
+}
+
+/// Checks before the run that `path` can be recorded into: its folder
+/// exists and is writable, and it is not a folder.
+fn check_recordable(path: &Path) -> Result<(), String> {
+    if path.is_dir() {
+        return Err(format!("--record {}: is a folder; give a file name, e.g. run.mcap", path.display()));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    squall_topology::fsio::check_writable_dir(dir)
+        .map_err(|e| format!("--record {}: cannot write there: {e}", path.display()))
+}
+
 fn parse_addr(s: &str) -> Result<SocketAddr, String> {
     let mut addrs =
         s.to_socket_addrs().map_err(|e| format!("expected HOST:PORT, e.g. 127.0.0.1:8080 ({e})"))?;
     addrs.next().ok_or_else(|| format!("{s} names no address"))
+}
+
+fn parse_host_port(s: &str) -> Result<(String, u16), String> {
+    let expected = || "expected HOST:PORT, e.g. 127.0.0.1:8765".to_string();
+    let (host, port) = s.rsplit_once(':').ok_or_else(expected)?;
+    let port = port.parse::<u16>().map_err(|_| expected())?;
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    if host.is_empty() {
+        return Err(expected());
+    }
+    Ok((host.to_string(), port))
 }
 
 fn parse_secs(s: &str) -> Result<f64, String> {
@@ -61,6 +123,8 @@ fn parse_period(s: &str) -> Result<f64, String> {
 pub(super) struct Watch {
     live: Option<Arc<LiveRun>>,
     ui: Option<UiServer>,
+    foxglove: Option<foxglove::WebSocketServerHandle>,
+    recording: Option<Recording>,
     linger: Duration,
     stop: Option<mpsc::Sender<()>>,
     threads: Vec<JoinHandle<()>>,
@@ -71,10 +135,19 @@ impl Watch {
     /// `--metrics-every` without an output folder, is an error (exit 2).
     pub(super) fn start(args: &WatchArgs, out: Option<&Path>) -> Result<Watch, String> {
         let logging = tracing::enabled!(tracing::Level::INFO);
-        let wanted = args.ui.is_some() || args.metrics_every.is_some() || logging;
+        let viewed = args.viewed();
+        let wanted = args.ui.is_some() || args.metrics_every.is_some() || logging || viewed;
+        if args.ui_linger > 0.0 && args.ui.is_none() && args.foxglove.is_none() {
+            return Err("--ui-linger keeps --ui or --foxglove up: give one of them".into());
+        }
+        if let Some(path) = &args.record {
+            check_recordable(path)?;
+        }
         let mut watch = Watch {
             live: wanted.then(LiveRun::new),
             ui: None,
+            foxglove: None,
+            recording: None,
             linger: Duration::from_secs_f64(args.ui_linger),
             stop: None,
             threads: Vec::new(),
@@ -92,6 +165,17 @@ impl Watch {
             eprintln!("live page: http://{}/ (Prometheus metrics at /metrics)", server.addr());
             watch.ui = Some(server);
         }
+        if let Some((host, port)) = &args.foxglove {
+            let server = view::serve(host, *port).map_err(|e| format!("--foxglove {host}:{port}: {e}"))?;
+            eprintln!(
+                "Foxglove live view: ws://{host}:{} (in Foxglove: Open connection, Foxglove WebSocket)",
+                server.port()
+            );
+            watch.foxglove = Some(server);
+        }
+        if let Some(path) = &args.record {
+            watch.recording = Some(Recording::start(path).map_err(|e| format!("--record {e}"))?);
+        }
         let (stop, stopped) = mpsc::channel::<()>();
         let mut every: Vec<Periodic> = Vec::new();
         if let Some(secs) = args.metrics_every {
@@ -103,6 +187,13 @@ impl Watch {
                 period: Duration::from_secs_f64(secs),
                 at_end: false,
                 action: Box::new(move |s| write_running(&dir, &s.snapshot.report)),
+            });
+        }
+        if viewed {
+            every.push(Periodic {
+                period: METRICS_PERIOD,
+                at_end: true,
+                action: Box::new(view::publish_metrics),
             });
         }
         if logging {
@@ -125,25 +216,30 @@ impl Watch {
     }
 
     /// Stops the periodic writers (before the final metrics.json is
-    /// written, which they must not overwrite).
-    pub(super) fn run_ended(&mut self) {
+    /// written, which they must not overwrite) and finishes the
+    /// recording; a recording that cannot be finished is the error.
+    pub(super) fn run_ended(&mut self) -> Result<(), String> {
         self.stop.take();
         for t in self.threads.drain(..) {
             let _ = t.join();
+        }
+        match self.recording.take() {
+            Some(r) => r.finish().map_err(|e| format!("--record {e}")),
+            None => Ok(()),
         }
     }
 
     /// Keeps the live page up for `--ui-linger` (or until Ctrl-C), then
     /// stops it.
     pub(super) fn finish(mut self, stop: &StopRequest) {
-        self.run_ended();
-        let Some(ui) = self.ui.take() else { return };
+        if let Err(e) = self.run_ended() {
+            eprintln!("error: {e}");
+        }
+        if self.ui.is_none() && self.foxglove.is_none() {
+            return;
+        }
         if !self.linger.is_zero() && !stop.is_made() {
-            eprintln!(
-                "the live page stays up at http://{}/ for {:.0} s (Ctrl-C ends it)",
-                ui.addr(),
-                self.linger.as_secs_f64()
-            );
+            eprintln!("the live views stay up for {:.0} s (Ctrl-C ends them)", self.linger.as_secs_f64());
             let until = Instant::now() + self.linger;
             while Instant::now() < until && !stop.is_made() {
                 std::thread::sleep(
@@ -151,7 +247,12 @@ impl Watch {
                 );
             }
         }
-        ui.stop();
+        if let Some(ui) = self.ui.take() {
+            ui.stop();
+        }
+        if let Some(f) = self.foxglove.take() {
+            f.stop().wait_blocking();
+        }
     }
 }
 

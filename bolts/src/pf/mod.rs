@@ -12,6 +12,7 @@ pub mod kinds;
 pub mod kld;
 pub mod model;
 pub(crate) mod modes;
+pub mod particle_set;
 pub mod population;
 pub mod resample;
 pub mod shard;
@@ -20,5 +21,6 @@ pub(crate) mod trajectory;
 
 pub use filter::{Filter, StepReport};
 pub use model::{Correction, ParticleModel};
+pub use particle_set::ParticleSet;
 pub use smoother::{MeasuredStep, Smoother};
 pub use trajectory::{BetweenScans, NoiseWeights, TrajectoryOutput};

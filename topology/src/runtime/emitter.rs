@@ -103,6 +103,12 @@ impl Emitter {
         }
     }
 
+    /// Whether anything subscribes to `stream`: a component can leave
+    /// unbuilt what nobody would receive (a view's extra output).
+    pub fn is_subscribed(&self, stream: &str) -> bool {
+        self.streams.iter().any(|s| &*s.name == stream && !s.subscriptions.is_empty())
+    }
+
     /// Emits `value` on `stream`.
     pub async fn emit<T: Message>(&mut self, stream: &str, value: T) -> Result<(), EmitError> {
         let index = self.stream_index::<T>(stream)?;

@@ -36,6 +36,7 @@ use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Tas
 use crate::pf::assign::{Placement, assign, loads, moved, round_robin};
 use crate::pf::kinds::messages::{Decision, Ready, Report, Settings};
 use crate::pf::modes::{Hypotheses, modes};
+use crate::pf::particle_set::ParticleSet;
 use crate::pf::population::Population;
 use crate::pf::shard::SlotReport;
 use crate::pf::trajectory::{self, MeasuredStep};
@@ -279,6 +280,14 @@ impl Resampler {
         self.marks.push(mark);
         self.measured.push((mark.0, g.measured));
         out.emit("decision", decision).await?;
+        if out.is_subscribed("particles") {
+            let set = ParticleSet {
+                stamp: mark.0,
+                poses: poses.iter().map(|p| p.0).collect(),
+                weights: d.weights.clone(),
+            };
+            out.emit("particles", set).await?;
+        }
         let ModeSettings { keep, radius, turn } = self.modes;
         let by_mode = self.estimate == Estimate::Mode;
         if keep > 0 || by_mode {
@@ -336,7 +345,8 @@ impl Bolt for Resampler {
             .output::<Ready>("ready")
             .output::<PoseStamped>("pose")
             .output::<PoseStamped>("trajectory")
-            .output::<Hypotheses>("hypotheses");
+            .output::<Hypotheses>("hypotheses")
+            .output::<ParticleSet>("particles");
     }
 
     async fn prepare(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {

@@ -1,0 +1,325 @@
+//! `sink.foxglove`: publishes whatever streams it subscribes to as
+//! Foxglove channels (see [`convert`](super::convert) for the schemas):
+//!
+//! | message | channel | schema |
+//! | --- | --- | --- |
+//! | laser scan | `/scan` | `foxglove.LaserScan` in `laser` |
+//! | pose on stream S | `/S`, and every pose so far on `/S/path` (throttled) | `foxglove.PoseInFrame`, `foxglove.PosesInFrame` in `map` |
+//! | occupancy grid on stream S | `/S` (throttled) | `foxglove.Grid` in `map` |
+//! | particle set | `/particles`, and weights on `/particles/weights` | `foxglove.PosesInFrame` |
+//! | hypotheses | `/hypotheses` | `foxglove.PosesInFrame` |
+//! | plane-filtered or scan points | `/points` | `foxglove.PointCloud` in `base_link` |
+//! | odometry (of scans, points, `odom`) | `/tf` | `foxglove.FrameTransforms`: `odom → base_link`, and `base_link → laser` |
+//! | a pose on stream `tf_from` | `/tf` | `map → odom` (the estimate against odometry) |
+//! | the line map (`line_map` param) | `/line_map`, once | `foxglove.SceneUpdate` |
+//!
+//! Throttled channels follow the readings' own clock (`map_hz`,
+//! `path_hz`), so a recording holds the same messages however fast the
+//! run went; the last of each is published when the run ends. Messages
+//! of other types are counted (`not_shown`), not published.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+
+use foxglove::messages::{
+    FrameTransforms, Grid, LaserScan, PointCloud, PoseInFrame, PosesInFrame, SceneUpdate,
+};
+use foxglove::{Channel, Encode};
+use serde::Deserialize;
+use squall_core::geometry::{Pose2, Real};
+use squall_core::linemap::LineMap;
+use squall_core::occupancy::OccupancyGrid;
+use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
+
+use super::context;
+use super::convert::{self, BASE_LINK, LASER, MAP, ODOM};
+use crate::cgr::observation::Observation2d;
+use crate::pf::ParticleSet;
+use crate::pf::modes::Hypotheses;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct SinkParams {
+    /// Occupancy grids published per second of the readings' clock.
+    map_hz: Real,
+    /// Trajectory paths published per second of the readings' clock.
+    path_hz: Real,
+    /// The stream whose poses place `map → odom`.
+    tf_from: String,
+    /// A line map to publish once, on `/line_map`.
+    line_map: Option<String>,
+}
+
+impl Default for SinkParams {
+    fn default() -> Self {
+        SinkParams { map_hz: 1.0, path_hz: 0.2, tf_from: "pose".into(), line_map: None }
+    }
+}
+
+/// Odometry poses, and estimates, kept at most while waiting for the
+/// other of their stamp to place `map → odom` (they arrive on different
+/// inputs, in either order; what is older than the last pair goes).
+const UNPAIRED_KEPT: usize = 1 << 16;
+
+/// Keeps `pose` at `stamp` in `waiting`, the oldest going past
+/// [`UNPAIRED_KEPT`].
+fn keep(waiting: &mut BTreeMap<u64, Pose2>, stamp: f64, pose: Pose2) {
+    waiting.insert(stamp.max(0.0).to_bits(), pose);
+    if waiting.len() > UNPAIRED_KEPT {
+        waiting.pop_first();
+    }
+}
+
+/// Channels of one schema by topic, made when first used.
+struct Topics<T: Encode>(HashMap<String, Channel<T>>);
+
+impl<T: Encode> Default for Topics<T> {
+    fn default() -> Self {
+        Topics(HashMap::new())
+    }
+}
+
+impl<T: Encode> Topics<T> {
+    fn log(&mut self, topic: &str, msg: &T, stamp: f64) {
+        let channel = match self.0.get(topic) {
+            Some(c) => c,
+            None => {
+                self.0.entry(topic.to_string()).or_insert_with(|| context().channel_builder(topic).build())
+            }
+        };
+        channel.log_with_time(msg, convert::timestamp(stamp));
+    }
+}
+
+/// A throttled stream: the latest value, and when one was last published.
+struct Throttled<T> {
+    period: f64,
+    last: Option<f64>,
+    pending: Option<T>,
+}
+
+impl<T> Throttled<T> {
+    fn new(hz: Real) -> Self {
+        Throttled { period: if hz > 0.0 { 1.0 / hz } else { f64::INFINITY }, last: None, pending: None }
+    }
+
+    /// Keeps `value`; returns what is due at `stamp`.
+    fn offer(&mut self, value: T, stamp: f64) -> Option<T> {
+        let due = self.last.is_none_or(|last| stamp >= last + self.period);
+        if due {
+            self.last = Some(stamp);
+            self.pending = None;
+            Some(value)
+        } else {
+            self.pending = Some(value);
+            None
+        }
+    }
+}
+
+/// Publishes its inputs to Foxglove (see the module's table).
+pub struct FoxgloveSink {
+    p: SinkParams,
+    /// The latest reading stamp seen: the clock of maps, which have none.
+    now: f64,
+    /// The last odometry stamp, to publish each once.
+    last_odometry: Option<f64>,
+    /// Odometry and estimates by stamp (`f64::to_bits`, which orders
+    /// non-negative stamps), waiting for their pair.
+    odometry: BTreeMap<u64, Pose2>,
+    estimates: BTreeMap<u64, Pose2>,
+    maps: HashMap<String, Throttled<Arc<OccupancyGrid>>>,
+    paths: HashMap<String, (Vec<Pose2>, Throttled<()>)>,
+    scans: Topics<LaserScan>,
+    pose: Topics<PoseInFrame>,
+    poses: Topics<PosesInFrame>,
+    grids: Topics<Grid>,
+    clouds: Topics<PointCloud>,
+    tf: Topics<FrameTransforms>,
+    scenes: Topics<SceneUpdate>,
+    weights: Topics<Weights>,
+    line_map: Option<LineMap>,
+    /// Where the scanner sits on the robot, once a scan has said.
+    laser: Option<Pose2>,
+}
+
+/// The particles' weights, in the order of `/particles`' poses.
+#[derive(Debug, Clone, foxglove::Encode)]
+pub struct Weights {
+    /// Seconds.
+    pub stamp: f64,
+    /// Each particle's weight; they sum to 1.
+    pub weights: Vec<f64>,
+}
+
+impl std::fmt::Debug for FoxgloveSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FoxgloveSink").field("now", &self.now).finish_non_exhaustive()
+    }
+}
+
+impl FoxgloveSink {
+    /// Builds the sink from its params (see the module's docs).
+    pub fn from_params(p: &Params) -> Result<Self, ParamError> {
+        let params: SinkParams = p.parse()?;
+        if p.parallelism() != 1 {
+            return Err(ParamError::new("sink.foxglove publishes one view: use parallelism 1"));
+        }
+        if !(params.map_hz >= 0.0 && params.path_hz >= 0.0) {
+            return Err(ParamError::new("map_hz and path_hz must be 0 (only at the end) or more"));
+        }
+        let line_map = match &params.line_map {
+            None => None,
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .map_err(|e| ParamError::new(format!("line_map {path}: {e}")))?;
+                Some(LineMap::parse(path, &text).map_err(|e| ParamError::new(e.to_string()))?)
+            }
+        };
+        Ok(FoxgloveSink {
+            p: params,
+            now: 0.0,
+            last_odometry: None,
+            odometry: BTreeMap::new(),
+            estimates: BTreeMap::new(),
+            maps: HashMap::new(),
+            paths: HashMap::new(),
+            scans: Topics::default(),
+            pose: Topics::default(),
+            poses: Topics::default(),
+            grids: Topics::default(),
+            clouds: Topics::default(),
+            tf: Topics::default(),
+            scenes: Topics::default(),
+            weights: Topics::default(),
+            line_map,
+            laser: None,
+        })
+    }
+
+    /// Publishes `odom → base_link` at `stamp` (once per stamp, with
+    /// `base_link → laser` once a scan has placed it: the SDK keeps no
+    /// latched messages for late subscribers) and keeps it for `map →
+    /// odom`.
+    fn odometry(&mut self, stamp: f64, odometry: Pose2) {
+        if self.last_odometry.is_some_and(|s| s >= stamp) {
+            return;
+        }
+        self.last_odometry = Some(stamp);
+        keep(&mut self.odometry, stamp, odometry);
+        self.pair(stamp);
+        let mut transforms = vec![convert::transform(ODOM, BASE_LINK, &odometry, stamp)];
+        if let Some(laser) = &self.laser {
+            transforms.push(convert::transform(BASE_LINK, LASER, laser, stamp));
+        }
+        self.tf.log("/tf", &FrameTransforms { transforms }, stamp);
+    }
+
+    fn scan(&mut self, r: &LaserReading) {
+        self.now = self.now.max(r.stamp);
+        self.laser = Some(r.laser_offset);
+        self.odometry(r.stamp, r.odometry);
+        self.scans.log("/scan", &convert::laser_scan(r), r.stamp);
+    }
+
+    fn pose_on(&mut self, stream: &str, p: &PoseStamped) {
+        self.now = self.now.max(p.stamp);
+        self.pose.log(&format!("/{stream}"), &convert::pose_in_map(&p.pose, p.stamp), p.stamp);
+        if stream == self.p.tf_from {
+            keep(&mut self.estimates, p.stamp, p.pose);
+            self.pair(p.stamp);
+        }
+        let path_hz = self.p.path_hz;
+        let (path, throttle) =
+            self.paths.entry(stream.to_string()).or_insert_with(|| (Vec::new(), Throttled::new(path_hz)));
+        path.push(p.pose);
+        if throttle.offer((), p.stamp).is_some() {
+            let msg = convert::poses_in_map(path.iter(), p.stamp);
+            self.poses.log(&format!("/{stream}/path"), &msg, p.stamp);
+        }
+    }
+
+    /// Publishes `map → odom` at `stamp` once both its odometry and its
+    /// estimate are in, and forgets what is older.
+    fn pair(&mut self, stamp: f64) {
+        let key = stamp.max(0.0).to_bits();
+        let (Some(&odom), Some(&estimate)) = (self.odometry.get(&key), self.estimates.get(&key)) else {
+            return;
+        };
+        self.odometry = self.odometry.split_off(&(key + 1));
+        self.estimates = self.estimates.split_off(&(key + 1));
+        let map_to_odom = estimate.compose(&odom.inverse());
+        let transforms = vec![convert::transform(MAP, ODOM, &map_to_odom, stamp)];
+        self.tf.log("/tf", &FrameTransforms { transforms }, stamp);
+    }
+
+    fn map_on(&mut self, stream: &str, g: Arc<OccupancyGrid>) {
+        let map_hz = self.p.map_hz;
+        let throttle = self.maps.entry(stream.to_string()).or_insert_with(|| Throttled::new(map_hz));
+        if let Some(g) = throttle.offer(g, self.now) {
+            self.grids.log(&format!("/{stream}"), &convert::grid(&g, self.now), self.now);
+        }
+    }
+}
+
+impl Bolt for FoxgloveSink {
+    fn declare(&self, d: &mut Declarer) {
+        d.any_input();
+    }
+
+    async fn prepare(&mut self, _: &TaskContext) -> Result<(), BoxError> {
+        if let Some(map) = self.line_map.take() {
+            self.scenes.log("/line_map", &convert::line_map(&map, 0.0), 0.0);
+        }
+        Ok(())
+    }
+
+    async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+        let stream = input.stream().unwrap_or("default").to_string();
+        if let Some(r) = input.get::<LaserReading>() {
+            self.scan(r);
+        } else if let Some(p) = input.get::<PoseStamped>() {
+            self.pose_on(&stream, p);
+        } else if input.is::<OccupancyGrid>() {
+            let grid = input.into_arc::<OccupancyGrid>().map_err(|_| "an occupancy grid")?;
+            self.map_on(&stream, grid);
+        } else if let Some(o) = input.get::<Observation2d>() {
+            self.now = self.now.max(o.stamp);
+            self.odometry(o.stamp, o.odometry);
+            self.clouds.log("/points", &convert::points(o), o.stamp);
+        } else if let Some(o) = input.get::<Odometry>() {
+            self.now = self.now.max(o.stamp);
+            self.odometry(o.stamp, o.pose);
+        } else if let Some(s) = input.get::<ParticleSet>() {
+            self.poses.log("/particles", &convert::poses_in_map(s.poses.iter(), s.stamp), s.stamp);
+            let w = Weights { stamp: s.stamp, weights: s.weights.clone() };
+            self.weights.log("/particles/weights", &w, s.stamp);
+        } else if let Some(h) = input.get::<Hypotheses>() {
+            let modes: Vec<Pose2> = h.modes.iter().map(|m| m.pose).collect();
+            self.poses.log("/hypotheses", &convert::poses_in_map(modes.iter(), h.stamp), h.stamp);
+        } else {
+            out.count("not_shown", 1);
+            return Ok(());
+        }
+        out.count("published", 1);
+        Ok(())
+    }
+
+    async fn finish(&mut self, _: &mut Emitter) -> Result<(), BoxError> {
+        // The last of each throttled stream, so that a recording ends with
+        // the final map and the whole trajectory.
+        let now = self.now;
+        let maps: Vec<(String, Arc<OccupancyGrid>)> =
+            self.maps.iter_mut().filter_map(|(s, t)| Some((s.clone(), t.pending.take()?))).collect();
+        for (stream, g) in maps {
+            self.grids.log(&format!("/{stream}"), &convert::grid(&g, now), now);
+        }
+        for (stream, (path, throttle)) in &mut self.paths {
+            if throttle.last.is_none_or(|last| last < now) && !path.is_empty() {
+                self.poses.log(&format!("/{stream}/path"), &convert::poses_in_map(path.iter(), now), now);
+            }
+        }
+        Ok(())
+    }
+}
