@@ -136,13 +136,20 @@ impl LiveRun {
         Arc::new(LiveRun::default())
     }
 
-    /// Registers the run's tasks (once, when the runtime has built its
-    /// queues); returns each task's slot, `[component][task]`.
+    /// Registers the run's tasks when the runtime has built its queues
+    /// (the first call; a host starting tasks again, as a cluster's
+    /// coordinator replacing a lost worker's, gets the same slots);
+    /// returns each task's slot, `[component][task]`.
     pub(crate) fn attach(
         &self,
         topology: &Topology,
         inboxes: &[Vec<Vec<Arc<EdgeQueue>>>],
     ) -> Vec<Vec<Arc<TaskLive>>> {
+        let layout = self.layout.get_or_init(|| Self::layout_of(topology, inboxes));
+        layout.components.iter().map(|c| c.tasks.iter().map(|t| t.published.clone()).collect()).collect()
+    }
+
+    fn layout_of(topology: &Topology, inboxes: &[Vec<Vec<Arc<EdgeQueue>>>]) -> Layout {
         let components: Vec<LiveComponent> = topology
             .components
             .iter()
@@ -169,13 +176,7 @@ impl LiveRun {
                     .collect(),
             })
             .collect();
-        let slots =
-            components.iter().map(|c| c.tasks.iter().map(|t| t.published.clone()).collect()).collect();
-        let layout = Layout { topology: topology.spec.name.clone(), seed: topology.spec.seed, components };
-        if self.layout.set(layout).is_err() {
-            tracing::warn!("a watched run was started twice; the second is not shown");
-        }
-        slots
+        Layout { topology: topology.spec.name.clone(), seed: topology.spec.seed, components }
     }
 
     /// Records the run's final report: snapshots show it from now on.

@@ -13,13 +13,16 @@
 //! | a pose on stream `tf_from` | `/tf` | `map → odom` (the estimate against odometry) |
 //! | the line map (`line_map` param) | `/line_map`, once | `foxglove.SceneUpdate` |
 //!
-//! Throttled channels follow the readings' own clock (`map_hz`,
-//! `path_hz`), so a recording holds the same messages however fast the
-//! run went; the last of each is published when the run ends. Messages
-//! of other types are counted (`not_shown`), not published.
+//! Throttled channels (`map_hz`, `path_hz`) publish at most that often by
+//! the readings' own clock and by the wall's: a robot's live run gets
+//! them at the rate asked, and a log replayed a hundred times faster than
+//! it was recorded does not flood its viewers (a recording of it then
+//! holds fewer maps). The last of each is published when the run ends.
+//! Messages of other types are counted (`not_shown`), not published.
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
+use std::time::Instant;
 
 use foxglove::messages::{
     FrameTransforms, Grid, LaserScan, PointCloud, PoseInFrame, PosesInFrame, SceneUpdate,
@@ -71,6 +74,9 @@ fn keep(waiting: &mut BTreeMap<u64, Pose2>, stamp: f64, pose: Pose2) {
     }
 }
 
+/// The spacing of a published path's poses: metres, radians.
+const PATH_STEP: (Real, Real) = (0.1, 0.1);
+
 /// Channels of one schema by topic, made when first used.
 struct Topics<T: Encode>(HashMap<String, Channel<T>>);
 
@@ -92,10 +98,11 @@ impl<T: Encode> Topics<T> {
     }
 }
 
-/// A throttled stream: the latest value, and when one was last published.
+/// A throttled stream: the latest value, and when one was last published
+/// (by the readings' clock and by the wall's).
 struct Throttled<T> {
     period: f64,
-    last: Option<f64>,
+    last: Option<(f64, Instant)>,
     pending: Option<T>,
 }
 
@@ -104,11 +111,15 @@ impl<T> Throttled<T> {
         Throttled { period: if hz > 0.0 { 1.0 / hz } else { f64::INFINITY }, last: None, pending: None }
     }
 
-    /// Keeps `value`; returns what is due at `stamp`.
+    /// Keeps `value`; returns it if one is due at `stamp` (a period after
+    /// the last on both clocks).
     fn offer(&mut self, value: T, stamp: f64) -> Option<T> {
-        let due = self.last.is_none_or(|last| stamp >= last + self.period);
+        let now = Instant::now();
+        let due = self.last.is_none_or(|(at, wall)| {
+            stamp >= at + self.period && now.duration_since(wall).as_secs_f64() >= self.period
+        });
         if due {
-            self.last = Some(stamp);
+            self.last = Some((stamp, now));
             self.pending = None;
             Some(value)
         } else {
@@ -233,9 +244,18 @@ impl FoxgloveSink {
         let path_hz = self.p.path_hz;
         let (path, throttle) =
             self.paths.entry(stream.to_string()).or_insert_with(|| (Vec::new(), Throttled::new(path_hz)));
-        path.push(p.pose);
+        // A path for the eye: a pose where the robot has moved or turned
+        // a display's worth since the last kept, and the latest.
+        let moved = path.last().is_none_or(|last: &Pose2| {
+            (p.pose.x - last.x).hypot(p.pose.y - last.y) >= PATH_STEP.0
+                || squall_core::geometry::normalize_angle(p.pose.theta - last.theta).abs() >= PATH_STEP.1
+        });
+        if moved {
+            path.push(p.pose);
+        }
         if throttle.offer((), p.stamp).is_some() {
-            let msg = convert::poses_in_map(path.iter(), p.stamp);
+            let latest = (!moved).then_some(&p.pose);
+            let msg = convert::poses_in_map(path.iter().chain(latest), p.stamp);
             self.poses.log(&format!("/{stream}/path"), &msg, p.stamp);
         }
     }
@@ -316,7 +336,7 @@ impl Bolt for FoxgloveSink {
             self.grids.log(&format!("/{stream}"), &convert::grid(&g, now), now);
         }
         for (stream, (path, throttle)) in &mut self.paths {
-            if throttle.last.is_none_or(|last| last < now) && !path.is_empty() {
+            if throttle.pending.take().is_some() {
                 self.poses.log(&format!("/{stream}/path"), &convert::poses_in_map(path.iter(), now), now);
             }
         }
