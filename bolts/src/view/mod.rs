@@ -35,11 +35,20 @@ pub fn register(r: &mut Registry) {
 
 /// Serves the live view on `host:port` (port 0 picks a free one) for
 /// Foxglove to connect to; it runs until [`WebSocketServerHandle::stop`].
+/// Its sockets are served by one thread of its own (the SDK would start
+/// a thread per core, which on a robot's small computer take turns with
+/// the topology's tasks).
 pub fn serve(host: &str, port: u16) -> Result<WebSocketServerHandle, String> {
+    static RUNTIME: OnceLock<std::io::Result<tokio::runtime::Runtime>> = OnceLock::new();
+    let runtime = RUNTIME.get_or_init(|| {
+        tokio::runtime::Builder::new_multi_thread().worker_threads(1).thread_name("foxglove").enable_all().build()
+    });
+    let runtime = runtime.as_ref().map_err(|e| format!("cannot start the view's thread: {e}"))?;
     WebSocketServer::new()
         .name("squall")
         .bind(host, port)
         .context(context())
+        .tokio_runtime(runtime.handle())
         .start_blocking()
         .map_err(|e| e.to_string())
 }

@@ -8,7 +8,8 @@
 #           subscribed to every channel, at normal priority;
 #   niced   the same with the client at nice 19 (a viewer that takes only
 #           CPU the run leaves, as one on another machine would);
-# and printing each run's wall time (the run's own, from metrics.json).
+# and printing each run's wall time (the run's own, from metrics.json) and
+# the squall process's CPU time (user + system, from GNU time).
 # usage: watching_cost.sh BEFORE NOW ROUNDS
 set -euo pipefail
 before=$1 now=$2 rounds=${3:-5}
@@ -16,17 +17,20 @@ here=$(cd "$(dirname "$0")/../../.." && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 wall() { python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['wall_secs'])" "$1/metrics.json"; }
-echo "round,setting,wall_secs"
+cpu() { awk '{ print $1 + $2 }' "$work/$1.cpu"; }
+timed() { local name=$1; shift; /usr/bin/time -f "%U %S" -o "$work/$name.cpu" "$@"; }
+echo "round,setting,wall_secs,cpu_secs"
 for r in $(seq 1 "$rounds"); do
-  "$before" slam --out "$work/before" > /dev/null 2>&1
-  echo "$r,before,$(wall "$work/before")"
-  "$now" slam --out "$work/off" > /dev/null 2>&1
-  echo "$r,off,$(wall "$work/off")"
-  "$now" slam --out "$work/on" --ui 127.0.0.1:0 --foxglove 127.0.0.1:0 --record "$work/on.mcap" > /dev/null 2>&1
-  echo "$r,on,$(wall "$work/on")"
+  timed before "$before" slam --out "$work/before" > /dev/null 2>&1
+  echo "$r,before,$(wall "$work/before"),$(cpu before)"
+  timed off "$now" slam --out "$work/off" > /dev/null 2>&1
+  echo "$r,off,$(wall "$work/off"),$(cpu off)"
+  timed on "$now" slam --out "$work/on" --ui 127.0.0.1:0 --foxglove 127.0.0.1:0 --record "$work/on.mcap" \
+      > /dev/null 2>&1
+  echo "$r,on,$(wall "$work/on"),$(cpu on)"
   for setting in client niced; do
     port=$(python3 -c "import socket; s=socket.socket(); s.bind(('127.0.0.1',0)); print(s.getsockname()[1])")
-    "$now" slam --out "$work/$setting" --ui 127.0.0.1:0 --foxglove "127.0.0.1:$port" \
+    timed "$setting" "$now" slam --out "$work/$setting" --ui 127.0.0.1:0 --foxglove "127.0.0.1:$port" \
         --record "$work/$setting.mcap" > /dev/null 2>&1 &
     squall_pid=$!
     for _ in $(seq 1 100); do
@@ -40,7 +44,7 @@ for r in $(seq 1 "$rounds"); do
     client_pid=$!
     wait "$squall_pid"
     kill "$client_pid" 2> /dev/null || true
-    echo "$r,$setting,$(wall "$work/$setting")"
+    echo "$r,$setting,$(wall "$work/$setting"),$(cpu "$setting")"
   done
   cmp "$work/before/trajectory.tum" "$work/on/trajectory.tum"
   cmp "$work/before/map.pgm" "$work/client/map.pgm"
