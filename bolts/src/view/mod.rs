@@ -2,13 +2,16 @@
 //! over the Foxglove SDK's WebSocket server and recorded by its MCAP
 //! writer.
 //!
-//! Every channel belongs to one process-wide [`context`]. The
-//! `sink.foxglove` bolt ([`FoxgloveSink`]) publishes the streams it
-//! subscribes to into it; [`serve`] and [`Recording`] attach the live
-//! server and the recorder. With neither attached, publishing costs
-//! little more than the conversion: the SDK drops messages no sink takes.
-//! A live client that cannot keep up loses its oldest messages in the
-//! SDK's per-client queue, never holding up the topology.
+//! Channels belong to two process-wide contexts: [`context`], which a
+//! [`Recording`] records, gets every message; [`live_context`], which
+//! the server of [`serve`] serves, gets per topic at most what a screen
+//! shows (30 a second), so that a log replayed a hundred times faster
+//! than real time does not cost the robot's computer more to send than
+//! to process. The `sink.foxglove` bolt ([`FoxgloveSink`]) publishes the
+//! streams it subscribes to into both. With neither attached, publishing
+//! costs little more than the conversion: the SDK drops messages no sink
+//! takes. A live client that cannot keep up loses its oldest messages in
+//! the SDK's per-client queue, never holding up the topology.
 
 pub mod convert;
 mod sink;
@@ -22,8 +25,15 @@ use squall_topology::live::LiveSample;
 
 pub use sink::{FoxgloveSink, Weights};
 
-/// The context every squall channel is published in.
+/// The context of what is recorded: every message.
 pub fn context() -> &'static Arc<Context> {
+    static CONTEXT: OnceLock<Arc<Context>> = OnceLock::new();
+    CONTEXT.get_or_init(Context::new)
+}
+
+/// The context of what live viewers get: per topic at most what a screen
+/// shows (see `sink.foxglove`).
+pub fn live_context() -> &'static Arc<Context> {
     static CONTEXT: OnceLock<Arc<Context>> = OnceLock::new();
     CONTEXT.get_or_init(Context::new)
 }
@@ -41,13 +51,17 @@ pub fn register(r: &mut Registry) {
 pub fn serve(host: &str, port: u16) -> Result<WebSocketServerHandle, String> {
     static RUNTIME: OnceLock<std::io::Result<tokio::runtime::Runtime>> = OnceLock::new();
     let runtime = RUNTIME.get_or_init(|| {
-        tokio::runtime::Builder::new_multi_thread().worker_threads(1).thread_name("foxglove").enable_all().build()
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("foxglove")
+            .enable_all()
+            .build()
     });
     let runtime = runtime.as_ref().map_err(|e| format!("cannot start the view's thread: {e}"))?;
     WebSocketServer::new()
         .name("squall")
         .bind(host, port)
-        .context(context())
+        .context(live_context())
         .tokio_runtime(runtime.handle())
         .start_blocking()
         .map_err(|e| e.to_string())
@@ -110,15 +124,17 @@ pub struct ComponentMetrics {
     pub elapsed_s: f64,
 }
 
-/// Publishes every component's metrics of `sample` on `/squall/metrics`.
+/// Publishes every component's metrics of `sample` on `/squall/metrics`,
+/// recorded and live.
 pub fn publish_metrics(sample: &LiveSample) {
-    static CHANNEL: OnceLock<foxglove::Channel<ComponentMetrics>> = OnceLock::new();
-    let channel = CHANNEL.get_or_init(|| context().channel_builder("/squall/metrics").build());
+    static CHANNELS: OnceLock<[foxglove::Channel<ComponentMetrics>; 2]> = OnceLock::new();
+    let channels = CHANNELS
+        .get_or_init(|| [context(), live_context()].map(|c| c.channel_builder("/squall/metrics").build()));
     let s = &sample.snapshot;
     for (i, c) in s.report.components.iter().enumerate() {
         let rates = sample.rates.get(i).map(Vec::as_slice).unwrap_or(&[]);
         let n = rates.len().max(1) as f64;
-        channel.log(&ComponentMetrics {
+        let metrics = ComponentMetrics {
             component: c.name.clone(),
             tasks: c.tasks as u32,
             received: c.received,
@@ -130,6 +146,9 @@ pub fn publish_metrics(sample: &LiveSample) {
             queue_depth: s.tasks.get(i).map_or(0, |t| t.iter().map(|t| t.queue_depth as u64).sum()),
             execute_p99_us: c.execute.p99_us,
             elapsed_s: s.elapsed_secs,
-        });
+        };
+        for channel in channels {
+            channel.log(&metrics);
+        }
     }
 }

@@ -22,10 +22,10 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use foxglove::messages::{
-    FrameTransforms, Grid, LaserScan, PointCloud, PoseInFrame, PosesInFrame, SceneUpdate,
+    FrameTransform, FrameTransforms, Grid, LaserScan, PointCloud, PoseInFrame, PosesInFrame, SceneUpdate,
 };
 use foxglove::{Channel, Encode};
 use serde::Deserialize;
@@ -35,8 +35,8 @@ use squall_core::occupancy::OccupancyGrid;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
 
-use super::context;
 use super::convert::{self, BASE_LINK, LASER, MAP, ODOM};
+use super::{context, live_context};
 use crate::cgr::observation::Observation2d;
 use crate::pf::ParticleSet;
 use crate::pf::modes::Hypotheses;
@@ -77,24 +77,69 @@ fn keep(waiting: &mut BTreeMap<u64, Pose2>, stamp: f64, pose: Pose2) {
 /// The spacing of a published path's poses: metres, radians.
 const PATH_STEP: (Real, Real) = (0.1, 0.1);
 
+/// How often a live viewer gets a message of one topic at most: what a
+/// screen shows. A recording gets every message; a log replayed many
+/// times faster than real time would otherwise send a viewer thousands a
+/// second, and the sending costs the robot's computer more than the run.
+const LIVE_PERIOD: Duration = Duration::from_millis(33);
+
+/// One topic's channels: every message into the recording context, at
+/// most one a [`LIVE_PERIOD`] into the live one.
+struct Outlet<T: Encode> {
+    recorded: Channel<T>,
+    live: Channel<T>,
+    live_at: Option<Instant>,
+}
+
 /// Channels of one schema by topic, made when first used.
-struct Topics<T: Encode>(HashMap<String, Channel<T>>);
+struct Topics<T: Encode> {
+    outlets: HashMap<String, Outlet<T>>,
+    /// Messages live viewers did not get (throttled).
+    held_back: u64,
+}
 
 impl<T: Encode> Default for Topics<T> {
     fn default() -> Self {
-        Topics(HashMap::new())
+        Topics { outlets: HashMap::new(), held_back: 0 }
     }
 }
 
 impl<T: Encode> Topics<T> {
+    fn outlet(&mut self, topic: &str) -> &mut Outlet<T> {
+        self.outlets.entry(topic.to_string()).or_insert_with(|| Outlet {
+            recorded: context().channel_builder(topic).build(),
+            live: live_context().channel_builder(topic).build(),
+            live_at: None,
+        })
+    }
+
+    /// Logs `msg` for the recording, and for live viewers if one is due.
     fn log(&mut self, topic: &str, msg: &T, stamp: f64) {
-        let channel = match self.0.get(topic) {
-            Some(c) => c,
-            None => {
-                self.0.entry(topic.to_string()).or_insert_with(|| context().channel_builder(topic).build())
+        self.outlet(topic).recorded.log_with_time(msg, convert::timestamp(stamp));
+        if let Some(live) = self.live_due(topic) {
+            live.log_with_time(msg, convert::timestamp(stamp));
+        }
+    }
+
+    /// The live channel of `topic` if anyone watches it and a message is
+    /// due (counted as sent); else `None` (counted as held back when
+    /// someone watches).
+    fn live_due(&mut self, topic: &str) -> Option<&Channel<T>> {
+        let mut held_back = 0;
+        let o = self.outlets.get_mut(topic)?;
+        let due = o.live.has_sinks() && {
+            let now = Instant::now();
+            let due = o.live_at.is_none_or(|at| now.duration_since(at) >= LIVE_PERIOD);
+            if due {
+                o.live_at = Some(now);
+            } else {
+                held_back = 1;
             }
+            due
         };
-        channel.log_with_time(msg, convert::timestamp(stamp));
+        self.held_back += held_back;
+        let o = self.outlets.get(topic)?;
+        due.then_some(&o.live)
     }
 }
 
@@ -153,6 +198,10 @@ pub struct FoxgloveSink {
     line_map: Option<LineMap>,
     /// Where the scanner sits on the robot, once a scan has said.
     laser: Option<Pose2>,
+    /// The latest transform of each frame not yet sent live.
+    latest_tf: BTreeMap<String, FrameTransform>,
+    /// Messages held back from live viewers, as last counted.
+    held_back_counted: u64,
 }
 
 /// The particles' weights, in the order of `/particles`' poses.
@@ -206,6 +255,8 @@ impl FoxgloveSink {
             weights: Topics::default(),
             line_map,
             laser: None,
+            latest_tf: BTreeMap::new(),
+            held_back_counted: 0,
         })
     }
 
@@ -224,7 +275,22 @@ impl FoxgloveSink {
         if let Some(laser) = &self.laser {
             transforms.push(convert::transform(BASE_LINK, LASER, laser, stamp));
         }
-        self.tf.log("/tf", &FrameTransforms { transforms }, stamp);
+        self.transforms(transforms, stamp);
+    }
+
+    /// Records `transforms` on `/tf`; live viewers get, when one is due,
+    /// the latest transform of every frame since the last they got.
+    fn transforms(&mut self, transforms: Vec<FrameTransform>, stamp: f64) {
+        for t in &transforms {
+            self.latest_tf.insert(t.child_frame_id.clone(), t.clone());
+        }
+        let msg = FrameTransforms { transforms };
+        self.tf.outlet("/tf").recorded.log_with_time(&msg, convert::timestamp(stamp));
+        if let Some(live) = self.tf.live_due("/tf") {
+            let latest =
+                FrameTransforms { transforms: std::mem::take(&mut self.latest_tf).into_values().collect() };
+            live.log_with_time(&latest, convert::timestamp(stamp));
+        }
     }
 
     fn scan(&mut self, r: &LaserReading) {
@@ -260,6 +326,18 @@ impl FoxgloveSink {
         }
     }
 
+    /// Messages live viewers did not get so far (throttled).
+    fn held_back(&self) -> u64 {
+        self.scans.held_back
+            + self.pose.held_back
+            + self.poses.held_back
+            + self.grids.held_back
+            + self.clouds.held_back
+            + self.tf.held_back
+            + self.scenes.held_back
+            + self.weights.held_back
+    }
+
     /// Publishes `map → odom` at `stamp` once both its odometry and its
     /// estimate are in, and forgets what is older.
     fn pair(&mut self, stamp: f64) {
@@ -270,8 +348,7 @@ impl FoxgloveSink {
         self.odometry = self.odometry.split_off(&(key + 1));
         self.estimates = self.estimates.split_off(&(key + 1));
         let map_to_odom = estimate.compose(&odom.inverse());
-        let transforms = vec![convert::transform(MAP, ODOM, &map_to_odom, stamp)];
-        self.tf.log("/tf", &FrameTransforms { transforms }, stamp);
+        self.transforms(vec![convert::transform(MAP, ODOM, &map_to_odom, stamp)], stamp);
     }
 
     fn map_on(&mut self, stream: &str, g: Arc<OccupancyGrid>) {
@@ -323,6 +400,11 @@ impl Bolt for FoxgloveSink {
             return Ok(());
         }
         out.count("published", 1);
+        let held_back = self.held_back();
+        if held_back > self.held_back_counted {
+            out.count("live_held_back", held_back - self.held_back_counted);
+            self.held_back_counted = held_back;
+        }
         Ok(())
     }
 
