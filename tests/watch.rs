@@ -307,3 +307,57 @@ fn watching_flags_that_cannot_work_are_refused_before_the_run() {
     let addr = taken.local_addr().unwrap().to_string();
     refused(&["--ui", &addr], &format!("--ui {addr}"));
 }
+
+/// In a cluster run, the page shows the workers' tasks as they report
+/// them each second, their hosts, and the traffic between processes.
+#[cfg(feature = "cluster")]
+#[test]
+fn a_cluster_runs_page_shows_the_workers_tasks_and_the_traffic_between_processes() {
+    let workers = common::cluster::Workers::start(1);
+    let cluster = workers.cluster_file("relay = [\"w1\"]");
+    let dir = out_dir("cluster");
+    let child = probe(&dir, 6, &["--ui-linger", "60", "--cluster", cluster.to_str().unwrap()], "warn");
+    let addr = page_addr(&dir);
+    let api = || -> serde_json::Value { serde_json::from_str(&get(&addr, "/api/run").1).unwrap_or_default() };
+    let relay = |s: &serde_json::Value| {
+        let c = s["report"]["components"].as_array()?.iter().find(|c| c["name"] == "relay")?.clone();
+        Some((c["received"].as_u64()?, s["tasks"][1][0]["host"].as_u64()?))
+    };
+    // While the run goes: the relay, on worker 1, counts; the edges into
+    // and out of its process carry messages.
+    let mut first = 0;
+    wait_for(
+        "the relay's count from its worker",
+        Duration::from_secs(30),
+        || {
+            let s = api();
+            let Some((received, host)) = relay(&s) else { return false };
+            first = received;
+            s["ended"] == false && host == 1 && received > 0 && s["hosts"][0]["host"] == 1
+        },
+        || format!("{}\n{}", api(), workers.logs()),
+    );
+    wait_for(
+        "the relay's count to grow",
+        Duration::from_secs(30),
+        || relay(&api()).is_some_and(|(received, _)| received > first),
+        || format!("{}\n{}", api(), workers.logs()),
+    );
+    let s = api();
+    let edges = s["edges"].as_array().unwrap();
+    assert!(
+        edges.iter().any(|e| e["from"] == "relay" && e["to"] == "sink" && e["messages"].as_u64() > Some(0)),
+        "{s}"
+    );
+    let (_, metrics) = get(&addr, "/metrics");
+    assert!(
+        metrics.contains(r#"squall_edge_messages_total{from="relay",stream="default",to="sink"}"#),
+        "{metrics}"
+    );
+    assert!(
+        metrics.contains(r#"squall_edge_bytes_total{from="relay",stream="default",to="sink"}"#),
+        "{metrics}"
+    );
+    wait_for("the run's end", Duration::from_secs(60), || api()["ended"] == true, || stderr(&dir));
+    interrupt(child, &dir);
+}

@@ -88,6 +88,26 @@ impl Collector for RunCollector {
                 ConstGauge::new(value(t, st)).encode(family.encode_family(&labels)?)
             })?;
         }
+        let mut messages = encoder.encode_descriptor(
+            "edge_messages",
+            "Tuples sent between processes on an edge (cluster runs)",
+            None,
+            ConstCounter::<u64>::new(0).metric_type(),
+        )?;
+        for e in &s.edges {
+            let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
+            ConstCounter::new(e.messages).encode(messages.encode_family(&labels)?)?;
+        }
+        let mut bytes = encoder.encode_descriptor(
+            "edge",
+            "Bytes sent between processes on an edge (cluster runs)",
+            Some(&Unit::Bytes),
+            ConstCounter::<u64>::new(0).metric_type(),
+        )?;
+        for e in &s.edges {
+            let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
+            ConstCounter::new(e.bytes).encode(bytes.encode_family(&labels)?)?;
+        }
         let mut family = encoder.encode_descriptor(
             "component_counter",
             "A counter a component keeps itself (resamplings, loops, maps written), over its tasks",

@@ -100,6 +100,8 @@ pub struct LiveRun {
     started: Instant,
     layout: OnceLock<Layout>,
     outcome: Mutex<Option<RunReport>>,
+    /// Cluster runs: each worker host as last heard from.
+    hosts: Mutex<BTreeMap<u16, HostHeard>>,
 }
 
 #[derive(Debug)]
@@ -122,11 +124,63 @@ struct LiveComponent {
 struct LiveTask {
     published: Arc<TaskLive>,
     inbox: Vec<Arc<EdgeQueue>>,
+    /// What the task's host last reported, when it runs in another
+    /// process (cluster mode): (host, report).
+    remote: Mutex<Option<(u16, RemoteTask)>>,
+}
+
+/// One task as its process reports it to the coordinator each second in
+/// a cluster run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize)]
+pub struct RemoteTask {
+    /// Its counters, as metrics.json has them.
+    pub received: u64,
+    /// Emit calls.
+    pub emitted: u64,
+    /// Drops at its inputs.
+    pub dropped: u64,
+    /// Undelivered at its inputs.
+    pub undelivered: u64,
+    /// Execute latency p50, µs.
+    pub p50_us: f64,
+    /// Execute latency p99, µs.
+    pub p99_us: f64,
+    /// Time in its code, ns.
+    pub busy_ns: u64,
+    /// Time its emits waited, ns.
+    pub blocked_ns: u64,
+    /// Restarts.
+    pub restarts: u32,
+    /// Tuples in its input queues now.
+    pub queue_depth: u64,
+    /// Their bounds, summed.
+    pub queue_bound: u64,
+    /// Deepest its queues have been.
+    pub queue_depth_max: u64,
+    /// Whether its thread runs.
+    pub running: bool,
+    /// Why its last incarnation failed.
+    pub last_error: Option<String>,
+    /// Its own counters.
+    pub counters: Vec<(String, u64)>,
+}
+
+/// A host of a cluster run as the coordinator last heard from it.
+#[derive(Debug, Clone)]
+struct HostHeard {
+    tasks: usize,
+    at: Instant,
+    edges: Vec<crate::metrics::EdgeReport>,
 }
 
 impl Default for LiveRun {
     fn default() -> Self {
-        LiveRun { started: Instant::now(), layout: OnceLock::new(), outcome: Mutex::new(None) }
+        LiveRun {
+            started: Instant::now(),
+            layout: OnceLock::new(),
+            outcome: Mutex::new(None),
+            hosts: Mutex::new(BTreeMap::new()),
+        }
     }
 }
 
@@ -172,11 +226,76 @@ impl LiveRun {
                     .collect(),
                 tasks: inboxes
                     .iter()
-                    .map(|inbox| LiveTask { published: Arc::default(), inbox: inbox.clone() })
+                    .map(|inbox| LiveTask {
+                        published: Arc::default(),
+                        inbox: inbox.clone(),
+                        remote: Mutex::new(None),
+                    })
                     .collect(),
             })
             .collect();
         Layout { topology: topology.spec.name.clone(), seed: topology.spec.seed, components }
+    }
+
+    /// The tasks for which `here(component, task)` holds, as this process
+    /// reports them to a cluster's coordinator (empty before the run has
+    /// started).
+    pub fn report_tasks(&self, here: impl Fn(usize, usize) -> bool) -> Vec<(u32, u32, RemoteTask)> {
+        let Some(layout) = self.layout.get() else { return Vec::new() };
+        let elapsed = self.started.elapsed();
+        let mut out = Vec::new();
+        for (c, lc) in layout.components.iter().enumerate() {
+            for (t, task) in lc.tasks.iter().enumerate().filter(|(t, _)| here(c, *t)) {
+                let (r, s) = task_now(t, task, elapsed);
+                let counters = r
+                    .custom
+                    .iter()
+                    .filter_map(|(k, v)| match v {
+                        CustomMetric::Counter(n) => Some((k.clone(), *n)),
+                        CustomMetric::Values { .. } => None,
+                    })
+                    .collect();
+                let remote = RemoteTask {
+                    received: r.received,
+                    emitted: r.emitted,
+                    dropped: r.dropped,
+                    undelivered: r.undelivered,
+                    p50_us: r.execute.p50_us,
+                    p99_us: r.execute.p99_us,
+                    busy_ns: s.busy_ns,
+                    blocked_ns: s.blocked_ns,
+                    restarts: r.restarts,
+                    queue_depth: s.queue_depth as u64,
+                    queue_bound: s.queue_bound as u64,
+                    queue_depth_max: r.queue_depth_max as u64,
+                    running: s.running,
+                    last_error: s.last_error,
+                    counters,
+                };
+                out.push((c as u32, t as u32, remote));
+            }
+        }
+        out
+    }
+
+    /// Takes in what worker `host` reported of its tasks, and the traffic
+    /// it sent to other processes so far (cluster mode, on the
+    /// coordinator). Tasks that are not in the run are left out.
+    pub fn absorb(
+        &self,
+        host: u16,
+        tasks: Vec<(u32, u32, RemoteTask)>,
+        edges: Vec<crate::metrics::EdgeReport>,
+    ) {
+        let Some(layout) = self.layout.get() else { return };
+        let count = tasks.len();
+        for (c, t, report) in tasks {
+            if let Some(task) = layout.components.get(c as usize).and_then(|lc| lc.tasks.get(t as usize)) {
+                *task.remote.lock().unwrap_or_else(|e| e.into_inner()) = Some((host, report));
+            }
+        }
+        let heard = HostHeard { tasks: count, at: Instant::now(), edges };
+        self.hosts.lock().unwrap_or_else(|e| e.into_inner()).insert(host, heard);
     }
 
     /// Records the run's final report: snapshots show it from now on.
@@ -217,17 +336,42 @@ impl LiveRun {
                 edges: Vec::new(),
             },
         };
+        let heard = self.hosts.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        let hosts = heard
+            .iter()
+            .map(|(&host, h)| HostNow { host, tasks: h.tasks, heard_secs_ago: h.at.elapsed().as_secs_f64() })
+            .collect();
+        let mut edges: BTreeMap<(String, String, String), crate::metrics::EdgeReport> = BTreeMap::new();
+        for e in heard.values().flat_map(|h| &h.edges) {
+            let sum = edges.entry((e.from.clone(), e.stream.clone(), e.to.clone())).or_insert_with(|| {
+                crate::metrics::EdgeReport {
+                    from: e.from.clone(),
+                    stream: e.stream.clone(),
+                    to: e.to.clone(),
+                    ..Default::default()
+                }
+            });
+            sum.messages += e.messages;
+            sum.bytes += e.bytes;
+            sum.encode_ms += e.encode_ms;
+            sum.decode_ms += e.decode_ms;
+        }
         Some(LiveSnapshot {
             elapsed_secs: elapsed.as_secs_f64(),
             ended,
             graph: layout.components.iter().flat_map(|c| c.inputs.iter().cloned()).collect(),
             tasks: queues,
+            hosts,
+            edges: edges.into_values().collect(),
             report,
         })
     }
 }
 
 fn task_now(t: usize, task: &LiveTask, elapsed: Duration) -> (TaskReport, TaskState) {
+    if let Some((host, r)) = task.remote.lock().unwrap_or_else(|e| e.into_inner()).clone() {
+        return remote_now(t, host, r, elapsed);
+    }
     let p = &task.published;
     let r = Ordering::Relaxed;
     let detail = p.detail.lock().unwrap_or_else(|e| e.into_inner()).clone();
@@ -258,6 +402,40 @@ fn task_now(t: usize, task: &LiveTask, elapsed: Duration) -> (TaskReport, TaskSt
         blocked_ns: p.blocked_ns.load(r),
         running: !p.exited.load(r),
         last_error: detail.last_error,
+        host: None,
+    };
+    (report, state)
+}
+
+/// A task of another process as its host last reported it.
+fn remote_now(t: usize, host: u16, r: RemoteTask, elapsed: Duration) -> (TaskReport, TaskState) {
+    let wall = elapsed.as_nanos().max(1) as f64;
+    let report = TaskReport {
+        task: t,
+        received: r.received,
+        emitted: r.emitted,
+        dropped: r.dropped,
+        undelivered: r.undelivered,
+        execute: Latency { p50_us: r.p50_us, p99_us: r.p99_us, ..Latency::default() },
+        busy_pct: 100.0 * r.busy_ns as f64 / wall,
+        backpressure_pct: 100.0 * r.blocked_ns as f64 / wall,
+        queue_depth_max: r.queue_depth_max as usize,
+        restarts: r.restarts,
+        acked: 0,
+        failed: 0,
+        replayed: 0,
+        abandoned: 0,
+        custom: r.counters.into_iter().map(|(k, v)| (k, CustomMetric::Counter(v))).collect(),
+        lost: false,
+    };
+    let state = TaskState {
+        queue_depth: r.queue_depth as usize,
+        queue_bound: r.queue_bound as usize,
+        busy_ns: r.busy_ns,
+        blocked_ns: r.blocked_ns,
+        running: r.running,
+        last_error: r.last_error,
+        host: Some(host),
     };
     (report, state)
 }
@@ -334,6 +512,20 @@ pub struct TaskState {
     pub running: bool,
     /// Why its last incarnation failed, if one did.
     pub last_error: Option<String>,
+    /// The worker host it runs on, in a cluster run (`None`: this
+    /// process).
+    pub host: Option<u16>,
+}
+
+/// A worker of a cluster run, as the coordinator last heard from it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct HostNow {
+    /// Its index in the cluster file (0 is the coordinator).
+    pub host: u16,
+    /// The tasks it reported.
+    pub tasks: usize,
+    /// Since its last report.
+    pub heard_secs_ago: f64,
 }
 
 /// A run as it stands.
@@ -347,6 +539,10 @@ pub struct LiveSnapshot {
     pub graph: Vec<GraphEdge>,
     /// `[component][task]`: queues and state now.
     pub tasks: Vec<Vec<TaskState>>,
+    /// Cluster runs: the workers heard from.
+    pub hosts: Vec<HostNow>,
+    /// Cluster runs: traffic between processes so far, per edge.
+    pub edges: Vec<crate::metrics::EdgeReport>,
     /// The counters as `metrics.json` has them (cumulative).
     pub report: RunReport,
 }

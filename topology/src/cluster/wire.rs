@@ -206,6 +206,16 @@ pub enum Control {
         /// Frames it refused: (too large, malformed).
         refused: (u64, u64),
     },
+    /// A worker's tasks as they stand, each second while a run goes, for
+    /// the coordinator's live view of it.
+    Live {
+        /// The reporting host.
+        host: u16,
+        /// (component, task, its counters now).
+        tasks: Vec<(u32, u32, crate::live::RemoteTask)>,
+        /// Traffic it sent to other processes so far, per edge.
+        edges: Vec<EdgeTraffic>,
+    },
 }
 
 /// Why an incoming frame was refused.

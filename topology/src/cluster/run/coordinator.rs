@@ -116,7 +116,8 @@ fn coordinate(
         host_count: host_count as u16,
         coordinator: session::coordinator_id(session),
     };
-    let reports = subscribe_to_reports(session, &plan(0).report_key(), events_tx.clone(), up_tx)?;
+    let watched = options.live.clone().map(|live| (live, edge_names(&layout, topology)));
+    let reports = subscribe_to_reports(session, &plan(0).report_key(), events_tx.clone(), up_tx, watched)?;
     let mut local =
         HostRun::build(topology, layout.clone(), session, &run, (0, host_count), options).map_err(setup)?;
     start_workers(cluster, session, &plan)?;
@@ -177,6 +178,7 @@ fn subscribe_to_reports(
     key: &str,
     events: mpsc::Sender<Event>,
     up: mpsc::Sender<Up>,
+    watched: Option<(Arc<crate::live::LiveRun>, Vec<EdgeName>)>,
 ) -> Result<zenoh::pubsub::Subscriber<()>, ClusterRunError> {
     session
         .declare_subscriber(key.to_string())
@@ -204,6 +206,11 @@ fn subscribe_to_reports(
             }
             Ok(Frame::Control(Control::Outcomes { host, tasks, edges, refused })) => {
                 let _ = up.send(Up::Outcomes { host, tasks, edges, refused });
+            }
+            Ok(Frame::Control(Control::Live { host, tasks, edges })) => {
+                if let Some((live, names)) = &watched {
+                    live.absorb(host, tasks, named_edges(names, edges));
+                }
             }
             Ok(other) => tracing::warn!("coordinator: unexpected report {other:?}"),
             Err(e) => tracing::warn!("coordinator: refused a report: {e}"),
@@ -554,6 +561,34 @@ impl Hosts for &mut ClusterHosts<'_> {
 }
 
 /// The traffic per edge, named, in edge order.
+/// (producer, stream, consumer) of an edge between processes.
+type EdgeName = (String, String, String);
+
+/// The name of each edge between processes, by id.
+fn edge_names(layout: &Layout, topology: &Topology) -> Vec<EdgeName> {
+    let name = |c: usize| topology.components[c].spec.name.clone();
+    layout.edges.iter().map(|e| (name(e.producer), e.stream.to_string(), name(e.consumer))).collect()
+}
+
+/// Traffic with its edges named (ids not in `names` left out).
+fn named_edges(names: &[EdgeName], traffic: Vec<EdgeTraffic>) -> Vec<EdgeReport> {
+    traffic
+        .into_iter()
+        .filter_map(|t| {
+            let (from, stream, to) = names.get(t.edge as usize)?.clone();
+            Some(EdgeReport {
+                from,
+                stream,
+                to,
+                messages: t.messages,
+                bytes: t.bytes,
+                encode_ms: t.encode_ns as f64 / 1e6,
+                decode_ms: t.decode_ns as f64 / 1e6,
+            })
+        })
+        .collect()
+}
+
 fn edge_reports(layout: &Layout, topology: &Topology, traffic: HashMap<u32, EdgeTraffic>) -> Vec<EdgeReport> {
     let mut edges: Vec<_> = traffic.into_values().collect();
     edges.sort_by_key(|e| e.edge);

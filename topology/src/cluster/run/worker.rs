@@ -22,6 +22,8 @@ use crate::spec::TopologySpec;
 
 /// How long a worker waits for `Go` after saying it is ready.
 const PATIENCE: Duration = Duration::from_secs(60);
+/// How often a worker reports its tasks' counters while a run goes.
+const LIVE_PERIOD: Duration = Duration::from_secs(1);
 
 /// What a worker did in one run.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -57,6 +59,9 @@ pub fn host_run(
             put(session, reply_key, Control::Refused { run: plan.run.clone(), reason: reason.to_string() });
         reason
     };
+    // The tasks publish their counters, for the reports of `Control::Live`.
+    let live = crate::live::LiveRun::new();
+    let options = &RunOptions { live: Some(live.clone()), ..options.clone() };
     let (topology, control, mut host) = prepare(session, plan, registry, options).map_err(refuse)?;
     put(session, reply_key, Control::Ready { run: plan.run.clone() })?;
     let name = topology.name().to_string();
@@ -78,7 +83,16 @@ pub fn host_run(
         }
         return Err(e);
     }
-    let mut run = Following { session, plan, topology: &topology, options, host: &mut host, report_key };
+    let mut run = Following {
+        session,
+        plan,
+        topology: &topology,
+        options,
+        host: &mut host,
+        report_key,
+        live,
+        next_live: Instant::now() + LIVE_PERIOD,
+    };
     let aborted = run.follow(&control, &events_tx, &events)?;
     let tasks = run.hand_over(&control, aborted, release)?;
     Ok(Hosted { topology: name, tasks, aborted })
@@ -154,6 +168,8 @@ struct Following<'a> {
     options: &'a RunOptions,
     host: &'a mut HostRun,
     report_key: String,
+    live: Arc<crate::live::LiveRun>,
+    next_live: Instant,
 }
 
 impl Following<'_> {
@@ -178,6 +194,10 @@ impl Following<'_> {
                 let event = Control::Event { component: component as u32, task: task as u32, event };
                 put(self.session, &self.report_key, event)?;
             }
+            if Instant::now() >= self.next_live {
+                self.next_live = Instant::now() + LIVE_PERIOD;
+                put(self.session, &self.report_key, self.live_report())?;
+            }
             match control.next(Duration::from_millis(1))? {
                 Some(Control::Advance { component, stage }) => {
                     let Some(stage) = Stage::from_u8(stage) else { continue };
@@ -197,6 +217,13 @@ impl Following<'_> {
                 Some(_) | None => {}
             }
         }
+    }
+
+    /// This host's tasks and traffic now.
+    fn live_report(&self) -> Control {
+        let (layout, host) = (&self.host.layout, self.plan.host);
+        let tasks = self.live.report_tasks(|c, t| layout.host(c, t) == host);
+        Control::Live { host, tasks, edges: self.host.link.traffic() }
     }
 
     /// This host's totals for status request `nonce` (none while a tick runs).
