@@ -298,6 +298,13 @@ impl LiveRun {
         self.hosts.lock().unwrap_or_else(|e| e.into_inner()).insert(host, heard);
     }
 
+    /// Takes in the traffic this process (host `host`, a cluster's
+    /// coordinator) has sent to others so far.
+    pub fn absorb_traffic(&self, host: u16, tasks: usize, edges: Vec<crate::metrics::EdgeReport>) {
+        let heard = HostHeard { tasks, at: Instant::now(), edges };
+        self.hosts.lock().unwrap_or_else(|e| e.into_inner()).insert(host, heard);
+    }
+
     /// Records the run's final report: snapshots show it from now on.
     pub fn finish(&self, report: &RunReport) {
         *self.outcome.lock().unwrap_or_else(|e| e.into_inner()) = Some(report.clone());

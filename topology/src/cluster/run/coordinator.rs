@@ -117,7 +117,8 @@ fn coordinate(
         coordinator: session::coordinator_id(session),
     };
     let watched = options.live.clone().map(|live| (live, edge_names(&layout, topology)));
-    let reports = subscribe_to_reports(session, &plan(0).report_key(), events_tx.clone(), up_tx, watched)?;
+    let reports =
+        subscribe_to_reports(session, &plan(0).report_key(), events_tx.clone(), up_tx, watched.clone())?;
     let mut local =
         HostRun::build(topology, layout.clone(), session, &run, (0, host_count), options).map_err(setup)?;
     start_workers(cluster, session, &plan)?;
@@ -125,6 +126,22 @@ fn coordinate(
     send_control(session, &control, Control::Go).map_err(setup)?;
     let started = Instant::now();
     local.start(topology, options, &events_tx).map_err(setup)?;
+    // The traffic this process's own tasks send, for the live view, each
+    // second until the run ends.
+    let (traffic_stop, traffic_stopped) = mpsc::channel::<()>();
+    if let Some((live, names)) = &watched {
+        let (live, names, link) = (live.clone(), names.clone(), local.link.clone());
+        let tasks = (0..layout.components())
+            .map(|c| (0..layout.tasks(c)).filter(|&t| layout.host(c, t) == 0).count())
+            .sum();
+        std::thread::spawn(move || {
+            while let Err(mpsc::RecvTimeoutError::Timeout) =
+                traffic_stopped.recv_timeout(Duration::from_secs(1))
+            {
+                live.absorb_traffic(0, tasks, named_edges(&names, link.traffic()));
+            }
+        });
+    }
     watch_for_lost_workers(io, session, cluster, events_tx.clone())?;
     let mut hosts_view = ClusterHosts {
         local: &mut local,
@@ -143,6 +160,7 @@ fn coordinate(
         next_nonce: 1,
     };
     let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options.abort_grace);
+    drop(traffic_stop);
     let ended = hosts_view.end();
     send_control(session, &control, Control::Collect).map_err(setup)?;
     let mut gathered = Gathered::new(topology, ended.warnings);
@@ -178,7 +196,7 @@ fn subscribe_to_reports(
     key: &str,
     events: mpsc::Sender<Event>,
     up: mpsc::Sender<Up>,
-    watched: Option<(Arc<crate::live::LiveRun>, Vec<EdgeName>)>,
+    reported: Option<(Arc<crate::live::LiveRun>, Vec<EdgeName>)>,
 ) -> Result<zenoh::pubsub::Subscriber<()>, ClusterRunError> {
     session
         .declare_subscriber(key.to_string())
@@ -208,7 +226,7 @@ fn subscribe_to_reports(
                 let _ = up.send(Up::Outcomes { host, tasks, edges, refused });
             }
             Ok(Frame::Control(Control::Live { host, tasks, edges })) => {
-                if let Some((live, names)) = &watched {
+                if let Some((live, names)) = &reported {
                     live.absorb(host, tasks, named_edges(names, edges));
                 }
             }
