@@ -23,6 +23,7 @@ use serde::Serialize;
 
 use crate::metrics::{
     ComponentReport, CustomMetric, Latency, RunReport, TaskReport, TaskStats, summarize_custom,
+    summed_component,
 };
 use crate::plan::Topology;
 use crate::runtime::queue::EdgeQueue;
@@ -448,10 +449,9 @@ fn remote_now(t: usize, host: u16, r: RemoteTask, elapsed: Duration) -> (TaskRep
 }
 
 fn component_of(lc: &LiveComponent, per_task: Vec<TaskReport>) -> ComponentReport {
-    let n = per_task.len().max(1) as f64;
-    let sum = |f: fn(&TaskReport) -> u64| per_task.iter().map(f).sum::<u64>();
     // Percentiles do not add up over tasks; the component shows its
-    // slowest task's (what a capacity question asks about).
+    // slowest task's (what a capacity question asks about). Of its own
+    // metrics, the counters add up.
     let execute =
         per_task.iter().map(|t| t.execute).max_by(|a, b| a.p99_us.total_cmp(&b.p99_us)).unwrap_or_default();
     let mut custom: BTreeMap<String, CustomMetric> = BTreeMap::new();
@@ -466,27 +466,7 @@ fn component_of(lc: &LiveComponent, per_task: Vec<TaskReport>) -> ComponentRepor
             }
         }
     }
-    ComponentReport {
-        name: lc.name.clone(),
-        kind: lc.kind.clone(),
-        role: lc.role,
-        tasks: per_task.len(),
-        received: sum(|t| t.received),
-        emitted: sum(|t| t.emitted),
-        dropped: sum(|t| t.dropped),
-        undelivered: sum(|t| t.undelivered),
-        execute,
-        busy_pct: per_task.iter().map(|t| t.busy_pct).sum::<f64>() / n,
-        backpressure_pct: per_task.iter().map(|t| t.backpressure_pct).sum::<f64>() / n,
-        queue_depth_max: per_task.iter().map(|t| t.queue_depth_max).max().unwrap_or(0),
-        restarts: per_task.iter().map(|t| t.restarts).sum(),
-        acked: sum(|t| t.acked),
-        failed: sum(|t| t.failed),
-        replayed: sum(|t| t.replayed),
-        abandoned: sum(|t| t.abandoned),
-        custom,
-        per_task,
-    }
+    summed_component(&lc.name, &lc.kind, lc.role, per_task, execute, custom)
 }
 
 /// One subscription of the topology's graph.

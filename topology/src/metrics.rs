@@ -352,27 +352,42 @@ pub(crate) fn component_report(
         }
     }
     let per_task: Vec<TaskReport> = outcomes.iter().enumerate().map(|(i, o)| task_report(i, o)).collect();
+    let latency = Latency::of(&latency);
+    summed_component(name, kind, role, per_task, latency, summarize_custom(&custom))
+}
+
+/// A component's report from its tasks' reports: counts summed, busy and
+/// backpressure averaged over tasks, with the given latency and own
+/// metrics (which do not add up task by task).
+pub(crate) fn summed_component(
+    name: &str,
+    kind: &str,
+    role: Role,
+    per_task: Vec<TaskReport>,
+    execute: Latency,
+    custom: BTreeMap<String, CustomMetric>,
+) -> ComponentReport {
+    let n = per_task.len().max(1) as f64;
     let sum = |f: fn(&TaskReport) -> u64| per_task.iter().map(f).sum::<u64>();
     ComponentReport {
         name: name.to_string(),
         kind: kind.to_string(),
         role,
-        tasks: outcomes.len(),
+        tasks: per_task.len(),
         received: sum(|t| t.received),
         emitted: sum(|t| t.emitted),
         dropped: sum(|t| t.dropped),
         undelivered: sum(|t| t.undelivered),
-        execute: Latency::of(&latency),
-        busy_pct: per_task.iter().map(|t| t.busy_pct).sum::<f64>() / per_task.len().max(1) as f64,
-        backpressure_pct: per_task.iter().map(|t| t.backpressure_pct).sum::<f64>()
-            / per_task.len().max(1) as f64,
+        execute,
+        busy_pct: per_task.iter().map(|t| t.busy_pct).sum::<f64>() / n,
+        backpressure_pct: per_task.iter().map(|t| t.backpressure_pct).sum::<f64>() / n,
         queue_depth_max: per_task.iter().map(|t| t.queue_depth_max).max().unwrap_or(0),
         restarts: per_task.iter().map(|t| t.restarts).sum(),
         acked: sum(|t| t.acked),
         failed: sum(|t| t.failed),
         replayed: sum(|t| t.replayed),
         abandoned: sum(|t| t.abandoned),
-        custom: summarize_custom(&custom),
+        custom,
         per_task,
     }
 }

@@ -154,7 +154,7 @@ fn counters_and_queues_show_while_the_run_goes() {
 }
 
 #[test]
-fn an_unwatched_run_publishes_nothing() {
+fn a_run_not_yet_started_has_no_snapshot() {
     let live = LiveRun::new();
     assert!(live.snapshot().is_none());
     assert!(Sampler::new(live).sample().is_none());

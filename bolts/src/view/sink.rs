@@ -33,7 +33,7 @@ use squall_core::geometry::{Pose2, Real};
 use squall_core::linemap::LineMap;
 use squall_core::occupancy::OccupancyGrid;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
-use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, TaskContext, Tuple};
+use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Source, TaskContext, Tuple};
 
 use super::convert::{self, BASE_LINK, LASER, MAP, ODOM};
 use super::{context, live_context};
@@ -64,6 +64,13 @@ impl Default for SinkParams {
 /// other of their stamp to place `map → odom` (they arrive on different
 /// inputs, in either order; what is older than the last pair goes).
 const UNPAIRED_KEPT: usize = 1 << 16;
+
+/// Drops every entry of `waiting` up to `key`.
+fn forget_through(waiting: &mut BTreeMap<u64, Pose2>, key: u64) {
+    while let Some(first) = waiting.first_entry().filter(|e| *e.key() <= key) {
+        first.remove();
+    }
+}
 
 /// Keeps `pose` at `stamp` in `waiting`, the oldest going past
 /// [`UNPAIRED_KEPT`].
@@ -106,11 +113,15 @@ impl<T: Encode> Default for Topics<T> {
 
 impl<T: Encode> Topics<T> {
     fn outlet(&mut self, topic: &str) -> &mut Outlet<T> {
-        self.outlets.entry(topic.to_string()).or_insert_with(|| Outlet {
-            recorded: context().channel_builder(topic).build(),
-            live: live_context().channel_builder(topic).build(),
-            live_at: None,
-        })
+        if !self.outlets.contains_key(topic) {
+            let outlet = Outlet {
+                recorded: context().channel_builder(topic).build(),
+                live: live_context().channel_builder(topic).build(),
+                live_at: None,
+            };
+            self.outlets.insert(topic.to_string(), outlet);
+        }
+        self.outlets.get_mut(topic).expect("inserted above")
     }
 
     /// Logs `msg` for the recording, and for live viewers if one is due.
@@ -345,8 +356,8 @@ impl FoxgloveSink {
         let (Some(&odom), Some(&estimate)) = (self.odometry.get(&key), self.estimates.get(&key)) else {
             return;
         };
-        self.odometry = self.odometry.split_off(&(key + 1));
-        self.estimates = self.estimates.split_off(&(key + 1));
+        forget_through(&mut self.odometry, key);
+        forget_through(&mut self.estimates, key);
         let map_to_odom = estimate.compose(&odom.inverse());
         self.transforms(vec![convert::transform(MAP, ODOM, &map_to_odom, stamp)], stamp);
     }
@@ -373,7 +384,10 @@ impl Bolt for FoxgloveSink {
     }
 
     async fn execute(&mut self, input: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
-        let stream = input.stream().unwrap_or("default").to_string();
+        let stream: Arc<str> = match input.source() {
+            Source::Stream { stream, .. } => stream.clone(),
+            Source::Peer { .. } => "peer".into(),
+        };
         if let Some(r) = input.get::<LaserReading>() {
             self.scan(r);
         } else if let Some(p) = input.get::<PoseStamped>() {
