@@ -234,7 +234,7 @@ fn the_foxglove_view_goes_live_and_into_an_mcap_file_with_every_reading() {
         .args(["slam", "--log", &shared_data("laser/aces.clf"), "--max-scans", "300"])
         .args(["--set", "source.params.rate=5", "--foxglove", "127.0.0.1:0", "--ui-linger", "60"])
         .args(["--record", mcap.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .env("SQUALL_LOG", "warn")
+        .env("SQUALL_LOG", "warn,squall::cli::watch=info")
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(Stdio::piped())
         .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
@@ -281,6 +281,10 @@ fn the_foxglove_view_goes_live_and_into_an_mcap_file_with_every_reading() {
     assert_eq!(recorded["/tf"]["messages"], 2 * scans, "{recorded}");
     assert!(recorded["/squall/metrics"]["messages"].as_u64() >= Some(9), "{recorded}");
     assert!(!dir.read_dir().unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial")));
+    // The run log says, while the run goes, how the maps grow.
+    let log = stderr(&dir);
+    let mut during = log.lines().filter(|l| l.contains("squall::cli::watch") && !l.contains("ended after"));
+    assert!(during.any(|l| l.contains("matcher") && l.contains("map_bytes")), "{log}");
 }
 
 #[test]

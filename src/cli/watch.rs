@@ -303,9 +303,25 @@ fn write_running(dir: &Path, report: &RunReport) {
     }
 }
 
+/// A component's own number as a person reads it: sizes (names ending in
+/// `bytes`) in kB, MB or GB.
+fn own(name: &str, v: u64) -> String {
+    if !name.ends_with("bytes") || v < 10_000 {
+        return v.to_string();
+    }
+    let (value, unit) = if v < 1_000_000 {
+        (v as f64 / 1e3, "kB")
+    } else if v < 1_000_000_000 {
+        (v as f64 / 1e6, "MB")
+    } else {
+        (v as f64 / 1e9, "GB")
+    };
+    format!("{value:.1} {unit}")
+}
+
 /// `12 s: src 10/s out; matcher ×2 10/s in, busy 83%; resampler 10/s in,
 /// busy 4%, resamplings 9`: per component its rate, how busy its tasks
-/// are, and the counters it keeps itself.
+/// are, and the counters and gauges it keeps itself.
 fn log_line(s: &LiveSample) -> String {
     let mut parts = Vec::new();
     for (i, c) in s.snapshot.report.components.iter().enumerate() {
@@ -326,8 +342,11 @@ fn log_line(s: &LiveSample) -> String {
             part.push_str(&format!(", {} dropped", c.dropped));
         }
         for (k, v) in &c.custom {
-            if let CustomMetric::Counter(v) = v {
-                part.push_str(&format!(", {k} {v}"));
+            match v {
+                CustomMetric::Counter(v) | CustomMetric::Gauge(v) => {
+                    part.push_str(&format!(", {k} {}", own(k, *v)))
+                }
+                CustomMetric::Values { .. } => {}
             }
         }
         parts.push(part);
@@ -336,5 +355,19 @@ fn log_line(s: &LiveSample) -> String {
         format!("ended after {:.1} s: {}", s.snapshot.report.wall_secs, parts.join("; "))
     } else {
         format!("{:.0} s: {}", s.snapshot.elapsed_secs, parts.join("; "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::own;
+
+    #[test]
+    fn sizes_read_in_units_and_other_numbers_as_they_are() {
+        assert_eq!(own("map_bytes", 2_670_284), "2.7 MB");
+        assert_eq!(own("map_bytes", 9_999), "9999");
+        assert_eq!(own("map_bytes", 45_000), "45.0 kB");
+        assert_eq!(own("map_bytes", 12_300_000_000), "12.3 GB");
+        assert_eq!(own("resamplings", 2_670_284), "2670284");
     }
 }

@@ -122,6 +122,21 @@ impl Collector for RunCollector {
                 }
             }
         }
+        let mut family = encoder.encode_descriptor(
+            "component_gauge",
+            "A level a component reports itself (bytes of map held), over its tasks",
+            None,
+            ConstGauge::<i64>::new(0).metric_type(),
+        )?;
+        for c in &s.report.components {
+            for (metric, value) in &c.custom {
+                if let CustomMetric::Gauge(gauge) = value {
+                    let labels = [("component", c.name.as_str()), ("metric", metric.as_str())];
+                    ConstGauge::new(i64::try_from(*gauge).unwrap_or(i64::MAX))
+                        .encode(family.encode_family(&labels)?)?;
+                }
+            }
+        }
         Ok(())
     }
 }

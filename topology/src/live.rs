@@ -164,6 +164,8 @@ pub struct RemoteTask {
     pub last_error: Option<String>,
     /// Its own counters.
     pub counters: Vec<(String, u64)>,
+    /// Its own gauges.
+    pub gauges: Vec<(String, u64)>,
 }
 
 /// A host of a cluster run as the coordinator last heard from it.
@@ -248,14 +250,17 @@ impl LiveRun {
         for (c, lc) in layout.components.iter().enumerate() {
             for (t, task) in lc.tasks.iter().enumerate().filter(|(t, _)| here(c, *t)) {
                 let (r, s) = task_now(t, task, elapsed);
-                let counters = r
-                    .custom
-                    .iter()
-                    .filter_map(|(k, v)| match v {
-                        CustomMetric::Counter(n) => Some((k.clone(), *n)),
-                        CustomMetric::Values { .. } => None,
-                    })
-                    .collect();
+                let own = |gauges: bool| {
+                    r.custom
+                        .iter()
+                        .filter_map(|(k, v)| match v {
+                            CustomMetric::Counter(n) if !gauges => Some((k.clone(), *n)),
+                            CustomMetric::Gauge(gauge) if gauges => Some((k.clone(), *gauge)),
+                            _ => None,
+                        })
+                        .collect()
+                };
+                let (counters, gauges) = (own(false), own(true));
                 let remote = RemoteTask {
                     received: r.received,
                     emitted: r.emitted,
@@ -272,6 +277,7 @@ impl LiveRun {
                     running: s.running,
                     last_error: s.last_error,
                     counters,
+                    gauges,
                 };
                 out.push((c as u32, t as u32, remote));
             }
@@ -433,7 +439,9 @@ fn remote_now(t: usize, host: u16, r: RemoteTask, elapsed: Duration) -> (TaskRep
         failed: 0,
         replayed: 0,
         abandoned: 0,
-        custom: r.counters.into_iter().map(|(k, v)| (k, CustomMetric::Counter(v))).collect(),
+        custom: (r.counters.into_iter().map(|(k, v)| (k, CustomMetric::Counter(v))))
+            .chain(r.gauges.into_iter().map(|(k, gauge)| (k, CustomMetric::Gauge(gauge))))
+            .collect(),
         lost: false,
     };
     let state = TaskState {
@@ -451,15 +459,16 @@ fn remote_now(t: usize, host: u16, r: RemoteTask, elapsed: Duration) -> (TaskRep
 fn component_of(lc: &LiveComponent, per_task: Vec<TaskReport>) -> ComponentReport {
     // Percentiles do not add up over tasks; the component shows its
     // slowest task's (what a capacity question asks about). Of its own
-    // metrics, the counters add up.
+    // metrics, the counters and gauges add up.
     let execute =
         per_task.iter().map(|t| t.execute).max_by(|a, b| a.p99_us.total_cmp(&b.p99_us)).unwrap_or_default();
     let mut custom: BTreeMap<String, CustomMetric> = BTreeMap::new();
     for t in &per_task {
         for (k, v) in &t.custom {
             match (custom.get_mut(k), v) {
-                (Some(CustomMetric::Counter(a)), CustomMetric::Counter(b)) => *a += b,
-                (None, CustomMetric::Counter(_)) => {
+                (Some(CustomMetric::Counter(a)), CustomMetric::Counter(b))
+                | (Some(CustomMetric::Gauge(a)), CustomMetric::Gauge(b)) => *a += b,
+                (None, CustomMetric::Counter(_) | CustomMetric::Gauge(_)) => {
                     custom.insert(k.clone(), v.clone());
                 }
                 _ => {}

@@ -38,11 +38,15 @@ pub(crate) struct TaskStats {
     pub(crate) custom: BTreeMap<String, Custom>,
 }
 
-/// A metric a component records itself (`Emitter::count`, `Emitter::record`).
+/// A metric a component records itself (`Emitter::count`,
+/// `Emitter::record`, `Emitter::gauge`).
 #[derive(Debug, Clone)]
 pub(crate) enum Custom {
     Counter(u64),
     Values(Box<Histogram<u64>>),
+    /// The last value set: a level (bytes held, particles owned), not a
+    /// total.
+    Gauge(u64),
 }
 
 impl Default for TaskStats {
@@ -68,7 +72,7 @@ impl TaskStats {
     pub(crate) fn count(&mut self, name: &str, delta: u64) {
         match self.custom.get_mut(name) {
             Some(Custom::Counter(c)) => *c += delta,
-            Some(Custom::Values(_)) => {}
+            Some(_) => {}
             None => {
                 self.custom.insert(name.to_string(), Custom::Counter(delta));
             }
@@ -78,11 +82,21 @@ impl TaskStats {
     pub(crate) fn record(&mut self, name: &str, value: u64) {
         match self.custom.get_mut(name) {
             Some(Custom::Values(h)) => h.saturating_record(value.max(1)),
-            Some(Custom::Counter(_)) => {}
+            Some(_) => {}
             None => {
                 let mut h = Box::new(new_histogram());
                 h.saturating_record(value.max(1));
                 self.custom.insert(name.to_string(), Custom::Values(h));
+            }
+        }
+    }
+
+    pub(crate) fn gauge(&mut self, name: &str, value: u64) {
+        match self.custom.get_mut(name) {
+            Some(Custom::Gauge(g)) => *g = value,
+            Some(_) => {}
+            None => {
+                self.custom.insert(name.to_string(), Custom::Gauge(value));
             }
         }
     }
@@ -140,6 +154,9 @@ pub enum CustomMetric {
         /// Maximum.
         max: u64,
     },
+    /// A level's last value, summed over a component's tasks (a number in
+    /// metrics.json, as a counter is; Prometheus types it as a gauge).
+    Gauge(u64),
 }
 
 pub(crate) fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<String, CustomMetric> {
@@ -148,6 +165,7 @@ pub(crate) fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<St
         .map(|(k, v)| {
             let m = match v {
                 Custom::Counter(c) => CustomMetric::Counter(*c),
+                Custom::Gauge(g) => CustomMetric::Gauge(*g),
                 Custom::Values(h) => CustomMetric::Values {
                     count: h.len(),
                     mean: h.mean(),
@@ -241,7 +259,8 @@ pub struct ComponentReport {
     pub replayed: u64,
     /// Abandoned trees.
     pub abandoned: u64,
-    /// Custom counters summed over tasks (value metrics per task only).
+    /// Custom counters and gauges summed over tasks, value metrics
+    /// merged.
     pub custom: BTreeMap<String, CustomMetric>,
     /// Each task.
     pub per_task: Vec<TaskReport>,
@@ -342,7 +361,8 @@ pub(crate) fn component_report(
         latency.add(&o.stats.latency).expect("same bounds");
         for (k, v) in &o.stats.custom {
             match (custom.get_mut(k), v) {
-                (Some(Custom::Counter(a)), Custom::Counter(b)) => *a += b,
+                (Some(Custom::Counter(a)), Custom::Counter(b))
+                | (Some(Custom::Gauge(a)), Custom::Gauge(b)) => *a += b,
                 (Some(Custom::Values(a)), Custom::Values(b)) => a.add(&**b).expect("same bounds"),
                 (None, v) => {
                     custom.insert(k.clone(), v.clone());

@@ -331,7 +331,15 @@ impl<B: Bolt> BoltHarness<B> {
     pub fn counter(&self, name: &str) -> Option<u64> {
         match self.metrics().get(name)? {
             CustomMetric::Counter(c) => Some(*c),
-            CustomMetric::Values { .. } => None,
+            CustomMetric::Values { .. } | CustomMetric::Gauge(_) => None,
+        }
+    }
+
+    /// The bolt's gauge `name` as last set, if it has set it.
+    pub fn gauge(&self, name: &str) -> Option<u64> {
+        match self.metrics().get(name)? {
+            CustomMetric::Gauge(gauge) => Some(*gauge),
+            CustomMetric::Values { .. } | CustomMetric::Counter(_) => None,
         }
     }
 

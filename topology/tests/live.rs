@@ -37,7 +37,8 @@ impl Spout for Paced {
     }
 }
 
-/// Holds every tuple until `open`, then counts it.
+/// Holds every tuple until `open`, then counts it and sets its gauge
+/// `next` to one past it.
 struct Gate {
     open: Arc<AtomicBool>,
 }
@@ -47,11 +48,12 @@ impl Bolt for Gate {
         d.input::<u64>();
     }
 
-    async fn execute(&mut self, _: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
+    async fn execute(&mut self, t: Tuple, out: &mut Emitter) -> Result<(), BoxError> {
         while !self.open.load(Ordering::SeqCst) {
             std::thread::sleep(Duration::from_millis(1));
         }
         out.count("passed", 1);
+        out.gauge("next", t.get::<u64>().ok_or("a u64")? + 1);
         Ok(())
     }
 }
@@ -143,12 +145,18 @@ fn counters_and_queues_show_while_the_run_goes() {
             == Some(&squall_topology::CustomMetric::Counter(5))
     });
     assert!(!passed.ended);
+    // A gauge shows its last value, not a total of what it was set to.
+    let gate = passed.report.component("gate").unwrap();
+    assert_eq!(gate.custom.get("next"), Some(&squall_topology::CustomMetric::Gauge(5)));
 
     run.allowed.store(10, Ordering::SeqCst);
     let report = run.thread.join().unwrap();
     let last = run.live.snapshot().unwrap();
     assert!(last.ended);
     assert_eq!(counts(&last), (10, 10, 0));
+    let gate = report.component("gate").unwrap();
+    assert_eq!(gate.custom.get("next"), Some(&squall_topology::CustomMetric::Gauge(10)));
+    assert_eq!(gate.custom.get("passed"), Some(&squall_topology::CustomMetric::Counter(10)));
     assert_eq!(last.report.wall_secs, report.wall_secs, "the final report stands once the run ended");
     assert!(last.tasks.iter().flatten().all(|t| !t.running));
 }

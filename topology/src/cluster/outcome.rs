@@ -38,6 +38,7 @@ pub struct OutcomeWire {
 enum CustomWire {
     Counter(u64),
     Values(Vec<u8>),
+    Gauge(u64),
 }
 
 #[cfg(feature = "cluster")]
@@ -116,6 +117,7 @@ impl TaskOutcome {
                     let v = match v {
                         Custom::Counter(c) => CustomWire::Counter(*c),
                         Custom::Values(h) => CustomWire::Values(histogram_bytes(h)),
+                        Custom::Gauge(g) => CustomWire::Gauge(*g),
                     };
                     (k.clone(), v)
                 })
@@ -134,6 +136,7 @@ impl TaskOutcome {
             let v = match v {
                 CustomWire::Counter(c) => Custom::Counter(c),
                 CustomWire::Values(bytes) => Custom::Values(Box::new(decode_histogram(&bytes)?)),
+                CustomWire::Gauge(g) => Custom::Gauge(g),
             };
             custom.insert(k, v);
         }

@@ -185,6 +185,13 @@ impl Emitter {
         self.stats.record(name, value);
     }
 
+    /// Sets the component's gauge `name` to `value`: a level such as the
+    /// bytes of map this task holds (metrics.json and the live views show
+    /// the last value, summed over the component's tasks).
+    pub fn gauge(&mut self, name: &str, value: u64) {
+        self.stats.gauge(name, value);
+    }
+
     /// This task's index.
     pub fn task_index(&self) -> usize {
         self.task

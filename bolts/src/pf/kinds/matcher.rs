@@ -14,9 +14,10 @@
 //!
 //! Metrics: `evaluations_per_particle`, `correct_us`, `update_us`,
 //! `particles_received`, `map_bytes_per_reading` (the task's particles'
-//! memory after every tenth update, shared tiles counted once), and at the end
-//! `map_bytes` (the same, for the final set) and what the best particle
-//! learned of the robot (`ParticleModel::learned`).
+//! memory after every tenth update, shared tiles counted once), the gauge
+//! `map_bytes` (the same value, last set; at the end, the final set's) and
+//! at the end what the best particle learned of the robot
+//! (`ParticleModel::learned`).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -373,7 +374,9 @@ impl<M: HostedModel> Matcher<M> {
         if let Some(shard) = &self.shard
             && (self.updates - 1) % MEMORY_SAMPLE_INTERVAL == 0
         {
-            out.record("map_bytes_per_reading", self.model.memory(shard.held().iter().map(|(_, s)| s)));
+            let bytes = self.model.memory(shard.held().iter().map(|(_, s)| s));
+            out.record("map_bytes_per_reading", bytes);
+            out.gauge("map_bytes", bytes);
         }
         self.corrected(out).await
     }
@@ -479,7 +482,7 @@ impl<M: HostedModel> Bolt for Matcher<M> {
         }
         if let Some(shard) = &mut self.shard {
             // This task's particles' memory, shared map tiles counted once.
-            out.count("map_bytes", self.model.memory(shard.held().iter().map(|(_, s)| s)));
+            out.gauge("map_bytes", self.model.memory(shard.held().iter().map(|(_, s)| s)));
             // What the best particle learned of the robot: only its holder
             // counts it, so the component's total is that particle's.
             if let Some(best) = shard.state(self.best) {
