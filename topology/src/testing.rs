@@ -380,7 +380,13 @@ impl<B: Bolt> BoltHarness<B> {
                 name: decl.name.as_str().into(),
                 message: decl.message,
                 source: source.interned(),
-                subscriptions: vec![Subscription { route, targets, next: 0 }],
+                // Unbatched: the harness sees each emit as it is made.
+                subscriptions: vec![Subscription::new(
+                    route,
+                    targets,
+                    0,
+                    crate::spec::BatchSpec { max: 1, linger: std::time::Duration::ZERO },
+                )],
                 has_direct: direct.is_some(),
             });
             self.captures.push(Capture {

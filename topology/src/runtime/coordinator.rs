@@ -21,8 +21,10 @@ pub(crate) trait Hosts {
     /// Moves every task of `component` forward to `stage` and wakes it.
     fn advance(&mut self, component: usize, stage: Stage);
     /// (tuples accepted, tuples resolved) over every queue and every link
-    /// between processes, or `None` while a task is inside `tick`. Both
-    /// only grow, and resolved never passes accepted.
+    /// between processes, tuples held in producers' batches counted as
+    /// accepted, or `None` while a task is inside `tick`. Resolved only
+    /// grows and never passes accepted (which shrinks when a held tuple is
+    /// dropped by a full `drop_newest` queue).
     fn totals(&mut self) -> Option<(u64, u64)>;
     /// Stops everything now: marks the run aborting and closes the queues.
     fn abort(&mut self);

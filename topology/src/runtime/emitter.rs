@@ -7,7 +7,7 @@
 //! target behind the same calls.
 
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::error::EmitError;
@@ -16,6 +16,7 @@ use crate::metrics::TaskStats;
 use crate::runtime::acker::{AckTracker, Anchor, Replay};
 use crate::runtime::control::Control;
 use crate::runtime::target::Target;
+use crate::spec::BatchSpec;
 use crate::tuple::{Source, Tuple};
 
 /// How one subscription picks consumer tasks.
@@ -28,12 +29,36 @@ pub(crate) enum Route {
     Direct,
 }
 
-/// One subscriber of a stream: its tasks' queues for this edge.
+/// One subscriber of a stream: its tasks' queues for this edge, and what
+/// this producer holds for each of them.
 #[derive(Debug)]
 pub(crate) struct Subscription {
     pub(crate) route: Route,
     pub(crate) targets: Vec<Target>,
     pub(crate) next: usize,
+    pub(crate) batch: BatchSpec,
+    /// Per target: emits not yet handed over (empty when batching is off).
+    pub(crate) held: Vec<Held>,
+}
+
+impl Subscription {
+    pub(crate) fn new(route: Route, targets: Vec<Target>, next: usize, batch: BatchSpec) -> Self {
+        let held = targets.iter().map(|_| Held::default()).collect();
+        Subscription { route, targets, next, batch, held }
+    }
+}
+
+/// Tuples a producer holds for one consumer task, and since when.
+#[derive(Debug)]
+pub(crate) struct Held {
+    tuples: Vec<Tuple>,
+    since: Instant,
+}
+
+impl Default for Held {
+    fn default() -> Self {
+        Held { tuples: Vec::new(), since: Instant::now() }
+    }
 }
 
 /// A declared output stream and its subscribers.
@@ -78,6 +103,15 @@ pub struct Emitter {
     /// A bolt task's control, told when an emit stops waiting for queue
     /// space (the stall watchdog does not count that wait).
     pub(crate) watch: Option<Arc<Control>>,
+    /// The task's time as of the batch (or `next` call) being executed:
+    /// when a held tuple started waiting, without a clock read per emit.
+    pub(crate) clock: Instant,
+    /// Tuples held in batches, over every target.
+    held: usize,
+    /// `held` as the coordinator reads it: published before the task
+    /// releases its input and after every hand-over, so that no look at
+    /// the run sees it quiescent while a tuple is held.
+    pub(crate) held_now: Arc<AtomicU64>,
     task: usize,
 }
 
@@ -99,6 +133,9 @@ impl Emitter {
             aborting,
             holding: false,
             watch: None,
+            clock: Instant::now(),
+            held: 0,
+            held_now: Arc::new(AtomicU64::new(0)),
             task,
         }
     }
@@ -261,6 +298,8 @@ impl Emitter {
         // The payload is moved into the last delivery rather than cloned and
         // then dropped here: one reference-count round trip less per tuple.
         let mut payload = Some(payload);
+        // Whether a batch reached its bound.
+        let mut full = false;
         let subscriptions = stream.subscriptions.len();
         for (k, sub) in stream.subscriptions.iter_mut().enumerate() {
             let n = sub.targets.len();
@@ -294,13 +333,84 @@ impl Emitter {
                 };
                 let tuple =
                     Tuple { source: stream.source, payload, anchor: parent.map(|a| Box::new(a.child())) };
-                let blocked = self.stats.blocked;
-                let delivered = sub.targets[i].deliver(tuple, &self.aborting, &mut self.stats.blocked).await;
-                waited(self.watch.as_deref(), blocked, self.stats.blocked);
-                delivered?;
+                if sub.batch.is_off() {
+                    let blocked = self.stats.blocked;
+                    let delivered =
+                        sub.targets[i].deliver(tuple, &self.aborting, &mut self.stats.blocked).await;
+                    waited(self.watch.as_deref(), blocked, self.stats.blocked);
+                    delivered?;
+                    continue;
+                }
+                let held = &mut sub.held[i];
+                if held.tuples.is_empty() {
+                    held.since = self.clock;
+                }
+                held.tuples.push(tuple);
+                self.held += 1;
+                full |= held.tuples.len() >= sub.batch.max;
             }
         }
+        if full { self.flush(None).await } else { Ok(()) }
+    }
+
+    /// Hands over held tuples: every one (`due` = `None`), or those that
+    /// have waited their edge's linger by `due`. A first pass hands each
+    /// target what its queue has room for without waiting; a second waits
+    /// for room, target by target. So a producer never waits on one full
+    /// queue while holding tuples another could take, as it would not
+    /// unbatched.
+    pub(crate) async fn flush(&mut self, due: Option<Instant>) -> Result<(), EmitError> {
+        if self.held == 0 {
+            return Ok(());
+        }
+        for wait in [false, true] {
+            for stream in &mut self.streams {
+                for sub in &mut stream.subscriptions {
+                    let linger = sub.batch.linger;
+                    for (target, held) in sub.targets.iter().zip(&mut sub.held) {
+                        if held.tuples.is_empty() || due.is_some_and(|now| now < held.since + linger) {
+                            continue;
+                        }
+                        let before = held.tuples.len();
+                        let blocked = self.stats.blocked;
+                        let delivered = target
+                            .deliver_batch(&mut held.tuples, wait, &self.aborting, &mut self.stats.blocked)
+                            .await;
+                        waited(self.watch.as_deref(), blocked, self.stats.blocked);
+                        self.held -= before - held.tuples.len();
+                        delivered?;
+                    }
+                }
+            }
+        }
+        self.publish_held();
         Ok(())
+    }
+
+    /// Whether any tuple is held in a batch.
+    pub(crate) fn holds_tuples(&self) -> bool {
+        self.held > 0
+    }
+
+    /// Publishes how many tuples are held, for the coordinator's look at
+    /// the run.
+    pub(crate) fn publish_held(&self) {
+        self.held_now.store(self.held as u64, Ordering::SeqCst);
+    }
+
+    /// Gives up the held tuples of a task that ends without handing them
+    /// over (an abort, a failure): each counts as undelivered at its
+    /// target, its acking tree failed.
+    pub(crate) fn abandon_held(&mut self) {
+        for stream in &mut self.streams {
+            for sub in &mut stream.subscriptions {
+                for (target, held) in sub.targets.iter().zip(&mut sub.held) {
+                    target.abandon(&mut held.tuples);
+                }
+            }
+        }
+        self.held = 0;
+        self.publish_held();
     }
 
     /// Replays a failed root.

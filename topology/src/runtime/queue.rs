@@ -135,6 +135,98 @@ impl EdgeQueue {
         }
     }
 
+    /// Offers a producer's batch, front first, under one lock per pass:
+    /// as many as there is room for are queued; under `block` the rest
+    /// waits for room if `wait`, else stays in `tuples` (the caller
+    /// delivers elsewhere first and comes back); the drop policies drop
+    /// per tuple, exactly as that many single pushes would. Evicted or
+    /// refused tuples with an acking anchor are appended to `failed` (the
+    /// caller fails their trees); others are dropped here. Returns whether
+    /// the queue is closed (everything left was refused and counted as
+    /// undelivered).
+    pub(crate) async fn push_batch(
+        &self,
+        tuples: &mut Vec<Tuple>,
+        wait: bool,
+        blocked: &mut std::time::Duration,
+        failed: &mut Vec<Tuple>,
+    ) -> bool {
+        let keep_failed = |t: Tuple, failed: &mut Vec<Tuple>| {
+            if t.anchor.is_some() {
+                failed.push(t);
+            }
+        };
+        while !tuples.is_empty() {
+            let notified = {
+                let mut s = self.lock();
+                if s.closed {
+                    self.counters.undelivered.fetch_add(tuples.len() as u64, Ordering::Relaxed);
+                    tuples.drain(..).for_each(|t| keep_failed(t, failed));
+                    return true;
+                }
+                let was_empty = s.buf.is_empty();
+                let room = self.capacity.saturating_sub(self.occupied(&s));
+                let fits = room.min(tuples.len());
+                s.buf.extend(tuples.drain(..fits));
+                s.accepted += fits as u64;
+                if !tuples.is_empty() {
+                    match self.policy {
+                        OverflowPolicy::DropNewest => {
+                            self.counters.dropped.fetch_add(tuples.len() as u64, Ordering::Relaxed);
+                            tuples.drain(..).for_each(|t| keep_failed(t, failed));
+                        }
+                        OverflowPolicy::DropOldest => {
+                            // Each arrival evicts the oldest waiting tuple
+                            // (an earlier arrival of this batch, once the
+                            // older ones are gone).
+                            let n = tuples.len() as u64;
+                            for t in tuples.drain(..) {
+                                match s.buf.pop_front() {
+                                    Some(victim) => {
+                                        s.buf.push_back(t);
+                                        keep_failed(victim, failed);
+                                    }
+                                    // Everything is taken (a queue of
+                                    // handed-over tuples): the arrival
+                                    // itself is the oldest left to drop.
+                                    None => keep_failed(t, failed),
+                                }
+                            }
+                            self.counters.dropped.fetch_add(n, Ordering::Relaxed);
+                            s.accepted += n;
+                            s.resolved += n;
+                        }
+                        OverflowPolicy::Block => {}
+                    }
+                }
+                let depth = s.buf.len() + s.taken;
+                s.max_depth = s.max_depth.max(depth);
+                let wake = was_empty && !s.buf.is_empty() && self.consumer.is_parking();
+                let notified = if tuples.is_empty() || !wait {
+                    None
+                } else {
+                    s.blocked_producers += 1;
+                    let mut notified = Box::pin(self.room.notified());
+                    notified.as_mut().enable();
+                    Some(notified)
+                };
+                drop(s);
+                if wake {
+                    self.consumer.wake();
+                }
+                match notified {
+                    Some(n) => n,
+                    None => return false,
+                }
+            };
+            let waited = std::time::Instant::now();
+            notified.await;
+            *blocked += waited.elapsed();
+            self.lock().blocked_producers -= 1;
+        }
+        false
+    }
+
     fn enqueue(&self, mut s: std::sync::MutexGuard<'_, State>, tuple: Tuple, victim: Option<Tuple>) -> Push {
         let was_empty = s.buf.is_empty();
         s.buf.push_back(tuple);
@@ -283,6 +375,75 @@ mod tests {
             assert!(matches!(producer.await.unwrap(), Push::Queued));
             assert_eq!(q.depth(), 2);
         });
+    }
+
+    fn batch(range: std::ops::Range<u64>) -> Vec<Tuple> {
+        range.map(tuple).collect()
+    }
+
+    #[test]
+    fn a_batch_is_dropped_per_tuple_as_single_pushes_would_be() {
+        // drop_oldest: each arrival past the bound evicts the oldest.
+        let q = EdgeQueue::new(3, OverflowPolicy::DropOldest, Arc::new(TaskSignal::default()));
+        let (mut tuples, mut failed) = (batch(0..4), Vec::new());
+        run(q.push_batch(&mut tuples, true, &mut Default::default(), &mut failed));
+        let (mut more, mut failed) = (batch(4..10), failed);
+        run(q.push_batch(&mut more, true, &mut Default::default(), &mut failed));
+        assert!(tuples.is_empty() && more.is_empty() && failed.is_empty(), "no anchors to fail");
+        let mut out = VecDeque::new();
+        assert_eq!(q.take(&mut out, 100), 3);
+        assert_eq!(out.iter().map(value).collect::<Vec<_>>(), vec![7, 8, 9]);
+        assert_eq!(q.counters.dropped.load(Ordering::Relaxed), 7);
+        q.release(3);
+        assert_eq!(q.totals(), (10, 10), "every arrival accepted, every one resolved");
+
+        // drop_newest: the arrivals past the bound are refused.
+        let q = EdgeQueue::new(2, OverflowPolicy::DropNewest, Arc::new(TaskSignal::default()));
+        let mut tuples = batch(0..5);
+        run(q.push_batch(&mut tuples, true, &mut Default::default(), &mut Vec::new()));
+        let mut out = VecDeque::new();
+        q.take(&mut out, 100);
+        assert_eq!(out.iter().map(value).collect::<Vec<_>>(), vec![0, 1]);
+        assert_eq!(q.counters.dropped.load(Ordering::Relaxed), 3);
+    }
+
+    #[test]
+    fn a_batch_to_a_full_block_queue_leaves_the_rest_unless_told_to_wait() {
+        let q = Arc::new(EdgeQueue::new(3, OverflowPolicy::Block, Arc::new(TaskSignal::default())));
+        let mut tuples = batch(0..5);
+        let closed = run(q.push_batch(&mut tuples, false, &mut Default::default(), &mut Vec::new()));
+        assert!(!closed);
+        assert_eq!(tuples.iter().map(value).collect::<Vec<_>>(), vec![3, 4], "what did not fit stays");
+        assert_eq!(q.depth(), 3);
+        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_time().build().unwrap();
+        rt.block_on(async {
+            let q2 = q.clone();
+            let producer = tokio::spawn(async move {
+                let mut blocked = std::time::Duration::ZERO;
+                q2.push_batch(&mut tuples, true, &mut blocked, &mut Vec::new()).await;
+                (tuples.len(), blocked)
+            });
+            let mut out = VecDeque::new();
+            q.take(&mut out, 2);
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+            assert!(!producer.is_finished(), "taken tuples still count against a block queue's bound");
+            q.release(2);
+            let (left, blocked) = producer.await.unwrap();
+            assert_eq!(left, 0);
+            assert!(blocked > std::time::Duration::ZERO, "the wait counts as backpressure");
+            q.take(&mut out, 100);
+            assert_eq!(out.iter().map(value).collect::<Vec<_>>(), vec![0, 1, 2, 3, 4], "order is kept");
+        });
+    }
+
+    #[test]
+    fn a_batch_to_a_closed_queue_is_counted_undelivered() {
+        let q = EdgeQueue::new(4, OverflowPolicy::Block, Arc::new(TaskSignal::default()));
+        q.close();
+        let mut tuples = batch(0..3);
+        assert!(run(q.push_batch(&mut tuples, true, &mut Default::default(), &mut Vec::new())));
+        assert!(tuples.is_empty());
+        assert_eq!(q.counters.undelivered.load(Ordering::Relaxed), 3);
     }
 
     #[test]

@@ -26,6 +26,60 @@ pub(crate) enum Target {
 }
 
 impl Target {
+    /// Delivers a producer's batch, front first (see
+    /// [`EdgeQueue::push_batch`]): without `wait`, what a full `block`
+    /// queue cannot take stays in `tuples`. Tuples dropped by policy or
+    /// refused by an exited consumer fail their acking trees; only an
+    /// abort is an error.
+    pub(crate) async fn deliver_batch(
+        &self,
+        tuples: &mut Vec<Tuple>,
+        wait: bool,
+        aborting: &AtomicBool,
+        blocked: &mut Duration,
+    ) -> Result<(), EmitError> {
+        let queue = match self {
+            Target::Local(queue) => queue,
+            #[cfg(feature = "cluster")]
+            Target::Remote(_) => {
+                // One tuple at a time across processes, each waiting for
+                // its credit.
+                for tuple in tuples.drain(..) {
+                    Box::pin(self.deliver(tuple, aborting, blocked)).await?;
+                }
+                return Ok(());
+            }
+        };
+        let mut failed = Vec::new();
+        let closed = queue.push_batch(tuples, wait, blocked, &mut failed).await;
+        for t in failed {
+            if let Some(a) = t.anchor {
+                a.fail();
+            }
+        }
+        if closed && aborting.load(Ordering::Relaxed) { Err(EmitError::ShuttingDown) } else { Ok(()) }
+    }
+
+    /// Counts tuples that can no longer be delivered (a producer's batch
+    /// when its task ends without a shutdown) as undelivered at this
+    /// target, and fails their acking trees.
+    pub(crate) fn abandon(&self, tuples: &mut Vec<Tuple>) {
+        match self {
+            Target::Local(queue) => {
+                queue.counters.undelivered.fetch_add(tuples.len() as u64, Ordering::Relaxed);
+            }
+            // The receiving process never saw them: nothing counts them
+            // there (the emits were counted here).
+            #[cfg(feature = "cluster")]
+            Target::Remote(_) => {}
+        }
+        for t in tuples.drain(..) {
+            if let Some(a) = t.anchor {
+                a.fail();
+            }
+        }
+    }
+
     /// Delivers `tuple`, waiting under `block` (the wait is added to
     /// `blocked`). A tuple dropped by policy or refused by an exited consumer
     /// fails its acking tree; only an abort is an error.

@@ -77,7 +77,8 @@ pub(crate) fn spawn_tasks(
                     // non-feedback inputs wait while the bolt holds them.
                     let mut holdable: Vec<bool> = planned.spec.inputs.iter().map(|i| !i.feedback).collect();
                     holdable.resize(inbox.len(), false);
-                    let task = BoltTask::new(common, inbox, holdable, tick);
+                    let mut task = BoltTask::new(common, inbox, holdable, tick);
+                    task.execute_sample = topology.spec.execute_sample;
                     let f = f.clone();
                     std::thread::Builder::new()
                         .name(name)

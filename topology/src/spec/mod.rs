@@ -24,6 +24,15 @@ use raw::{RawComponent, RawFile, RawInput};
 
 /// Default bound of an input queue, in tuples.
 pub const DEFAULT_QUEUE: usize = 1024;
+/// Default bound of a producer's batch to one consumer task: emits are
+/// handed over together once this many wait (or sooner, see
+/// [`BatchSpec`]).
+pub const DEFAULT_BATCH_MAX: usize = 256;
+/// The longest a batch may be held back, µs: a second.
+pub const MAX_LINGER_US: u64 = 1_000_000;
+/// Default sampling of execute times: the first tuple of every batch a
+/// task takes and one in this many of the rest are timed alone.
+pub const DEFAULT_EXECUTE_SAMPLE: usize = 16;
 /// Default acking timeout.
 pub const DEFAULT_ACK_TIMEOUT: Duration = Duration::from_secs(30);
 /// Default cap on a spout's un-acked tuples.
@@ -81,6 +90,12 @@ pub struct TopologySpec {
     /// memory above it fails the run, naming the limit. `None`: 90% of
     /// what the machine (or its cgroup) allows.
     pub memory_limit: Option<u64>,
+    /// `[topology] execute_sample`: the first tuple of every batch a task
+    /// takes, and one in this many of the rest, are timed alone for the
+    /// execute-latency percentiles (1: every tuple; default
+    /// [`DEFAULT_EXECUTE_SAMPLE`]). Busy time is measured over whole
+    /// batches either way.
+    pub execute_sample: usize,
     /// Spouts then bolts, in file order.
     pub components: Vec<ComponentSpec>,
     pub(crate) source: SourceText,
@@ -130,7 +145,43 @@ pub struct InputSpec {
     pub policy: OverflowPolicy,
     /// Whether this edge closes a cycle on purpose.
     pub feedback: bool,
+    /// How emits to each consumer task are batched.
+    pub batch: BatchSpec,
     pub(crate) line: usize,
+}
+
+/// How a producer task batches its emits to one consumer task of an edge
+/// (`batch = { max = 256, linger_us = 0 }` on the input).
+///
+/// Emits wait in the producer's buffer for that task and are handed over
+/// together: when `max` of them wait, when the producer has finished the
+/// input batch (or `next` call) it emitted them in and they have waited
+/// `linger` or longer, when the producer is about to wait (no input, a
+/// full queue downstream), on a tick, at `finish` and at shutdown. So with
+/// the default `linger_us = 0` a tuple waits at most for the rest of the
+/// batch its producer is executing; a busy producer hands over batches as
+/// large as the batches it takes, an idle one single tuples. `max = 1`
+/// turns batching off: every emit is handed over at once. Queue bounds,
+/// drop policies, counters and per-edge order are per tuple either way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BatchSpec {
+    /// Most tuples held for one consumer task.
+    pub max: usize,
+    /// How long a held tuple may wait past the batch it was emitted in.
+    pub linger: Duration,
+}
+
+impl Default for BatchSpec {
+    fn default() -> Self {
+        BatchSpec { max: DEFAULT_BATCH_MAX, linger: Duration::ZERO }
+    }
+}
+
+impl BatchSpec {
+    /// Whether emits are handed over one by one.
+    pub fn is_off(&self) -> bool {
+        self.max <= 1
+    }
 }
 
 /// At-least-once settings of a spout.
@@ -290,6 +341,10 @@ fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> (Topo
         }
         bytes
     });
+    let execute_sample = match &topology.execute_sample {
+        None => DEFAULT_EXECUTE_SAMPLE,
+        Some(n) => positive(n, "execute_sample", 1 << 20, None, &source, &mut errors).unwrap_or(1),
+    };
     if raw.spout.is_empty() {
         errors.push(source.error_at_line(1, None, "a topology needs at least one [[spout]]"));
     }
@@ -323,7 +378,7 @@ fn convert(raw: RawFile, source: SourceText, text: std::sync::Arc<str>) -> (Topo
             format!("the components' parallelism adds up to {tasks} tasks; at most {MAX_TASKS} run in one topology"),
         ));
     }
-    (TopologySpec { name, seed, stall, memory_limit, components, source, text }, errors)
+    (TopologySpec { name, seed, stall, memory_limit, execute_sample, components, source, text }, errors)
 }
 
 /// Whether `name` can name a component: `--set NAME.key=value`, metrics
@@ -543,6 +598,24 @@ fn convert_input(
         None => DEFAULT_QUEUE,
         Some(q) => positive(q, "queue", MAX_QUEUE, at, source, errors).unwrap_or(1),
     };
+    let mut batch = BatchSpec::default();
+    if let Some(b) = &input.batch {
+        let b = b.get_ref();
+        if let Some(max) = &b.max {
+            batch.max = positive(max, "batch.max", MAX_QUEUE, at, source, errors).unwrap_or(1);
+        }
+        if let Some(linger) = &b.linger_us {
+            let us = *linger.get_ref();
+            match u64::try_from(us) {
+                Ok(us) if us <= MAX_LINGER_US => batch.linger = Duration::from_micros(us),
+                _ => errors.push(source.error(
+                    linger.span().start,
+                    at,
+                    format!("batch.linger_us must be in 0..={MAX_LINGER_US} (a second), got {us}"),
+                )),
+            }
+        }
+    }
     (errors.len() == before).then(|| InputSpec {
         from: input.from.into_inner(),
         stream: input.stream.map_or_else(|| DEFAULT_STREAM.to_string(), Spanned::into_inner),
@@ -550,6 +623,7 @@ fn convert_input(
         queue,
         policy,
         feedback: input.feedback,
+        batch,
         line,
     })
 }
@@ -574,6 +648,25 @@ kind = "k.bolt"
 parallelism = 3
 inputs = [ { from = "src", grouping = "fields", fields = ["key"], queue = 8, policy = "drop_oldest" } ]
 "#;
+
+    #[test]
+    fn batching_is_on_by_default_and_set_per_input() {
+        let t = TopologySpec::parse("t.toml", GOOD).unwrap();
+        assert_eq!(t.component("b").unwrap().inputs[0].batch, BatchSpec::default());
+        assert_eq!(t.execute_sample, DEFAULT_EXECUTE_SAMPLE);
+        let set = GOOD.replace("queue = 8", "queue = 8, batch = { max = 32, linger_us = 250 }");
+        let t = TopologySpec::parse("t.toml", &set).unwrap();
+        let batch = t.component("b").unwrap().inputs[0].batch;
+        assert_eq!(batch, BatchSpec { max: 32, linger: Duration::from_micros(250) });
+        assert!(!batch.is_off());
+        let off = GOOD.replace("queue = 8", "queue = 8, batch = { max = 1 }");
+        assert!(
+            TopologySpec::parse("t.toml", &off).unwrap().component("b").unwrap().inputs[0].batch.is_off()
+        );
+        let unknown = GOOD.replace("queue = 8", "queue = 8, batch = { size = 3 }");
+        let err = TopologySpec::parse("t.toml", &unknown).unwrap_err().to_string();
+        assert!(err.contains("unknown field `size`"), "{err}");
+    }
 
     #[test]
     fn parses_the_contract_keys() {
@@ -617,6 +710,22 @@ inputs = [ { from = "src", grouping = "fields", fields = ["key"], queue = 8, pol
                 "t.toml:14: bolt \"b\": parallelism must be in 1..=1024",
             ),
             ("queue = 8", "queue = 4000000000", "t.toml:15: bolt \"b\": queue must be in 1..=1048576"),
+            (
+                "queue = 8",
+                "queue = 8, batch = { max = 0 }",
+                "t.toml:15: bolt \"b\": batch.max must be in 1..=1048576",
+            ),
+            (
+                "queue = 8",
+                "queue = 8, batch = { linger_us = -1 }",
+                "t.toml:15: bolt \"b\": batch.linger_us must be in 0..=1000000 (a second), got -1",
+            ),
+            (
+                "queue = 8",
+                "queue = 8, batch = { linger_us = 5000000 }",
+                "t.toml:15: bolt \"b\": batch.linger_us must be in 0..=1000000",
+            ),
+            ("seed = 7", "seed = 7\nexecute_sample = 0", "t.toml:5: execute_sample must be in 1..=1048576"),
             (
                 "parallelism = 3",
                 "parallelism = 3\nrestart = { max_restarts = 4294967296 }",

@@ -14,8 +14,8 @@ use toml_edit::{DocumentMut, Item, TableLike, Value};
 /// Keys a component table may hold (the file contract).
 const COMPONENT_KEYS: &[&str] =
     &["name", "kind", "parallelism", "params", "inputs", "tick_secs", "restart", "ack", "peer_queue"];
-const INPUT_KEYS: &[&str] = &["from", "stream", "grouping", "fields", "queue", "policy", "feedback"];
-const TOPOLOGY_KEYS: &[&str] = &["name", "seed", "stall_secs", "memory_limit_mb"];
+const INPUT_KEYS: &[&str] = &["from", "stream", "grouping", "fields", "queue", "policy", "feedback", "batch"];
+const TOPOLOGY_KEYS: &[&str] = &["name", "seed", "stall_secs", "memory_limit_mb", "execute_sample"];
 
 /// Why an override could not be read or applied.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

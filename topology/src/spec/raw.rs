@@ -23,6 +23,8 @@ pub(crate) struct RawTopology {
     pub(crate) stall_secs: Option<Spanned<f64>>,
     #[serde(default)]
     pub(crate) memory_limit_mb: Option<Spanned<i64>>,
+    #[serde(default)]
+    pub(crate) execute_sample: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -50,6 +52,14 @@ pub(crate) struct RawInput {
     pub(crate) policy: Option<Spanned<String>>,
     #[serde(default)]
     pub(crate) feedback: bool,
+    pub(crate) batch: Option<Spanned<RawBatch>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawBatch {
+    pub(crate) max: Option<Spanned<i64>>,
+    pub(crate) linger_us: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
