@@ -388,6 +388,7 @@ impl<B: Bolt> BoltHarness<B> {
                     crate::spec::BatchSpec { max: 1, linger: std::time::Duration::ZERO },
                 )],
                 has_direct: direct.is_some(),
+                held_only: false,
             });
             self.captures.push(Capture {
                 stream: Some(decl.name.clone()),

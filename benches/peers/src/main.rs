@@ -135,7 +135,8 @@ fn channels(messages: u64, per_send: usize, heap: bool) -> Duration {
         let (tx2, rx2) = crossbeam_channel::bounded::<HeapRecord>(1024);
         let source = std::thread::spawn(move || {
             for seq in 0..messages {
-                tx.send(HeapRecord { seq, key: seq % 1024, sent_ns: now_ns(), padding: vec![0; 40] }).unwrap();
+                tx.send(HeapRecord { seq, key: seq % 1024, sent_ns: now_ns(), padding: vec![0; 40] })
+                    .unwrap();
             }
         });
         let relay = std::thread::spawn(move || rx.iter().for_each(|r| tx2.send(r).unwrap()));
@@ -175,16 +176,58 @@ fn main() {
     let runs: usize = args.get(2).map_or(5, |a| a.parse().expect("RUNS is a number"));
     let batched = std::env::var("PEERS_SQUALL_BATCH").unwrap_or_default();
     let mut systems: Vec<System> = vec![
-        System { name: "squall probe, parallelism 1", run: Box::new({ let b = batched.clone(); move |m| squall(m, 1, &b) }), rates: vec![] },
-        System { name: "squall probe, parallelism 2", run: Box::new({ let b = batched.clone(); move |m| squall(m, 2, &b) }), rates: vec![] },
-        System { name: "squall probe, parallelism 1, batch max = 1", run: Box::new(|m| squall(m, 1, "{ max = 1 }")), rates: vec![] },
+        System {
+            name: "squall probe, parallelism 1",
+            run: Box::new({
+                let b = batched.clone();
+                move |m| squall(m, 1, &b)
+            }),
+            rates: vec![],
+        },
+        System {
+            name: "squall probe, parallelism 2",
+            run: Box::new({
+                let b = batched.clone();
+                move |m| squall(m, 2, &b)
+            }),
+            rates: vec![],
+        },
+        System {
+            name: "squall probe, parallelism 1, batch max = 1",
+            run: Box::new(|m| squall(m, 1, "{ max = 1 }")),
+            rates: vec![],
+        },
         System { name: "timely 0.32, 1 worker", run: Box::new(|m| timely(m, 1, false)), rates: vec![] },
-        System { name: "timely, 2 workers, exchanged twice", run: Box::new(|m| timely(m, 2, false)), rates: vec![] },
-        System { name: "timely, heap records + clock, 1 worker", run: Box::new(|m| timely(m, 1, true)), rates: vec![] },
-        System { name: "timely, heap records + clock, 2 workers", run: Box::new(|m| timely(m, 2, true)), rates: vec![] },
-        System { name: "3 threads, bounded(1024), 1 per send", run: Box::new(|m| channels(m, 1, false)), rates: vec![] },
-        System { name: "3 threads, bounded(1024), 1024 per send", run: Box::new(|m| channels(m, 1024, false)), rates: vec![] },
-        System { name: "3 threads, 1 per send, heap records + clock", run: Box::new(|m| channels(m, 1, true)), rates: vec![] },
+        System {
+            name: "timely, 2 workers, exchanged twice",
+            run: Box::new(|m| timely(m, 2, false)),
+            rates: vec![],
+        },
+        System {
+            name: "timely, heap records + clock, 1 worker",
+            run: Box::new(|m| timely(m, 1, true)),
+            rates: vec![],
+        },
+        System {
+            name: "timely, heap records + clock, 2 workers",
+            run: Box::new(|m| timely(m, 2, true)),
+            rates: vec![],
+        },
+        System {
+            name: "3 threads, bounded(1024), 1 per send",
+            run: Box::new(|m| channels(m, 1, false)),
+            rates: vec![],
+        },
+        System {
+            name: "3 threads, bounded(1024), 1024 per send",
+            run: Box::new(|m| channels(m, 1024, false)),
+            rates: vec![],
+        },
+        System {
+            name: "3 threads, 1 per send, heap records + clock",
+            run: Box::new(|m| channels(m, 1, true)),
+            rates: vec![],
+        },
     ];
     // PEERS_ONLY / PEERS_SKIP: systems whose name contains the text.
     if let Ok(only) = std::env::var("PEERS_ONLY") {

@@ -46,6 +46,48 @@ impl Subscription {
         let held = targets.iter().map(|_| Held::default()).collect();
         Subscription { route, targets, next, batch, held }
     }
+
+    /// The consumer tasks a payload goes to (`direct`: the task an
+    /// `emit_direct` names).
+    fn pick(
+        &mut self,
+        message: MessageType,
+        payload: &(dyn std::any::Any + Send + Sync),
+        direct: Option<usize>,
+    ) -> Result<std::ops::Range<usize>, EmitError> {
+        let n = self.targets.len();
+        Ok(match &self.route {
+            Route::RoundRobin => {
+                let i = self.next;
+                self.next = (i + 1) % n;
+                i..i + 1
+            }
+            Route::Fields(fields) => {
+                let i = (message.hash_fields(payload, fields)? % n as u64) as usize;
+                i..i + 1
+            }
+            Route::Global => 0..1,
+            Route::Direct => {
+                let task = direct.expect("a direct subscription has its task");
+                if task >= n {
+                    return Err(EmitError::NoSuchTask { task, count: n });
+                }
+                task..task + 1
+            }
+            Route::All => 0..n,
+        })
+    }
+
+    /// Holds `tuple` for target `i` (its batch starts waiting at `now`);
+    /// returns whether the batch reached its bound.
+    fn hold(&mut self, i: usize, tuple: Tuple, now: Instant) -> bool {
+        let held = &mut self.held[i];
+        if held.tuples.is_empty() {
+            held.since = now;
+        }
+        held.tuples.push(tuple);
+        held.tuples.len() >= self.batch.max
+    }
 }
 
 /// Tuples a producer holds for one consumer task, and since when.
@@ -70,6 +112,8 @@ pub(crate) struct StreamRoute {
     pub(crate) subscriptions: Vec<Subscription>,
     /// Whether any subscription is `direct` (emits must then name a task).
     pub(crate) has_direct: bool,
+    /// Whether every subscription batches its emits (and there is one).
+    pub(crate) held_only: bool,
 }
 
 /// Queues of the sibling tasks for peer exchange.
@@ -290,6 +334,13 @@ impl Emitter {
         direct: Option<usize>,
         root: Option<&Anchor>,
     ) -> Result<(), EmitError> {
+        if self.streams[index].held_only {
+            // Every subscriber batched: routing is plain code, and only a
+            // full batch awaits (boxed: a large future kept off the
+            // per-emit path).
+            let full = self.hold(index, payload, direct, root)?;
+            return if full { Box::pin(self.flush(None)).await } else { Ok(()) };
+        }
         let stream = &mut self.streams[index];
         let parent = root.or(self.anchor.as_deref());
         if direct.is_none() && stream.has_direct {
@@ -302,28 +353,8 @@ impl Emitter {
         let mut full = false;
         let subscriptions = stream.subscriptions.len();
         for (k, sub) in stream.subscriptions.iter_mut().enumerate() {
-            let n = sub.targets.len();
             let shared = payload.as_ref().expect("present until the last delivery");
-            let targets = match &sub.route {
-                Route::RoundRobin => {
-                    let i = sub.next;
-                    sub.next = (i + 1) % n;
-                    i..i + 1
-                }
-                Route::Fields(fields) => {
-                    let i = (stream.message.hash_fields(&**shared, fields)? % n as u64) as usize;
-                    i..i + 1
-                }
-                Route::Global => 0..1,
-                Route::Direct => {
-                    let task = direct.expect("checked above");
-                    if task >= n {
-                        return Err(EmitError::NoSuchTask { task, count: n });
-                    }
-                    task..task + 1
-                }
-                Route::All => 0..n,
-            };
+            let targets = sub.pick(stream.message, &**shared, direct)?;
             let last = targets.end - 1;
             for i in targets {
                 let payload = if k + 1 == subscriptions && i == last {
@@ -341,16 +372,47 @@ impl Emitter {
                     delivered?;
                     continue;
                 }
-                let held = &mut sub.held[i];
-                if held.tuples.is_empty() {
-                    held.since = self.clock;
-                }
-                held.tuples.push(tuple);
+                full |= sub.hold(i, tuple, self.clock);
                 self.held += 1;
-                full |= held.tuples.len() >= sub.batch.max;
             }
         }
         if full { self.flush(None).await } else { Ok(()) }
+    }
+
+    /// Routes a payload into the batches of a stream whose subscribers
+    /// all batch; returns whether a batch reached its bound.
+    fn hold(
+        &mut self,
+        index: usize,
+        payload: Payload,
+        direct: Option<usize>,
+        root: Option<&Anchor>,
+    ) -> Result<bool, EmitError> {
+        let stream = &mut self.streams[index];
+        let parent = root.or(self.anchor.as_deref());
+        if direct.is_none() && stream.has_direct {
+            return Err(EmitError::DirectNeedsTask(stream.name.to_string()));
+        }
+        let mut payload = Some(payload);
+        let mut full = false;
+        let subscriptions = stream.subscriptions.len();
+        for (k, sub) in stream.subscriptions.iter_mut().enumerate() {
+            let shared = payload.as_ref().expect("present until the last delivery");
+            let targets = sub.pick(stream.message, &**shared, direct)?;
+            let last = targets.end - 1;
+            for i in targets {
+                let payload = if k + 1 == subscriptions && i == last {
+                    payload.take().expect("taken once")
+                } else {
+                    payload.as_ref().expect("present until the last delivery").clone()
+                };
+                let tuple =
+                    Tuple { source: stream.source, payload, anchor: parent.map(|a| Box::new(a.child())) };
+                full |= sub.hold(i, tuple, self.clock);
+                self.held += 1;
+            }
+        }
+        Ok(full)
     }
 
     /// Hands over held tuples: every one (`due` = `None`), or those that

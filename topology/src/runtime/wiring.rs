@@ -203,8 +203,10 @@ impl Wiring {
                     }
                 }
                 let has_direct = subscriptions.iter().any(|s| matches!(s.route, Route::Direct));
+                let held_only = !subscriptions.is_empty() && subscriptions.iter().all(|s| !s.batch.is_off());
                 StreamRoute {
                     has_direct,
+                    held_only,
                     name: name.clone(),
                     message: decl.message,
                     source: Source::Stream { component: component.clone(), stream: name, task: t }.interned(),
