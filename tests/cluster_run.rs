@@ -93,7 +93,12 @@ fn wordcount_on_two_workers_counts_exactly_what_it_counts_in_process() {
     let edges = m["edges"].as_array().expect("a cluster run reports its edges");
     let edge = |from: &str, to: &str| edges.iter().find(|e| e["from"] == from && e["to"] == to);
     assert_eq!(edge("sentences", "split").unwrap()["messages"], 3000);
-    assert!(edge("split", "count").unwrap()["messages"].as_u64().unwrap() > 0);
+    let (messages, frames) =
+        (&edge("split", "count").unwrap()["messages"], &edge("split", "count").unwrap()["frames"]);
+    assert!(messages.as_u64().unwrap() > 0);
+    // A sentence's words for one task of another process travel as one
+    // frame: split hands over its batches whole.
+    assert!(frames.as_u64().unwrap() < messages.as_u64().unwrap(), "{frames} frames for {messages} words");
     assert!(edge("count", "report").unwrap()["bytes"].as_u64().unwrap() > 0);
     // Spread evenly: split 0 and count 0, 2 on w1; split 1 and count 1 on w2.
     for (w, tasks) in [(0, 3), (1, 2)] {

@@ -98,6 +98,16 @@ impl Collector for RunCollector {
             let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
             ConstCounter::new(e.messages).encode(messages.encode_family(&labels)?)?;
         }
+        let mut frames = encoder.encode_descriptor(
+            "edge_frames",
+            "Frames the tuples of an edge travelled in between processes (a batch is one)",
+            None,
+            ConstCounter::<u64>::new(0).metric_type(),
+        )?;
+        for e in &s.edges {
+            let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
+            ConstCounter::new(e.frames).encode(frames.encode_family(&labels)?)?;
+        }
         let mut bytes = encoder.encode_descriptor(
             "edge",
             "Bytes sent between processes on an edge (cluster runs)",

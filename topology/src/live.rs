@@ -366,6 +366,7 @@ impl LiveRun {
                 }
             });
             sum.messages += e.messages;
+            sum.frames += e.frames;
             sum.bytes += e.bytes;
             sum.encode_ms += e.encode_ms;
             sum.decode_ms += e.decode_ms;

@@ -303,6 +303,8 @@ pub struct EdgeReport {
     pub to: String,
     /// Tuples sent.
     pub messages: u64,
+    /// Frames they travelled in (a producer's batch is one frame).
+    pub frames: u64,
     /// Their encoded bytes (frame headers included).
     pub bytes: u64,
     /// Time spent serializing them, in total.

@@ -10,8 +10,9 @@ use serde::{Deserialize, Serialize};
 
 /// The first bytes of every frame.
 const MAGIC: [u8; 2] = *b"SQ";
-/// The frame format; a peer speaking another is refused.
-pub const WIRE_VERSION: u8 = 1;
+/// The frame format; a peer speaking another is refused (2: batches of
+/// tuples travel as one frame).
+pub const WIRE_VERSION: u8 = 2;
 /// Frames larger than this are refused unread, unless the cluster sets
 /// another limit: a map with its tiles fits many times over.
 pub const DEFAULT_MAX_FRAME: usize = 64 << 20;
@@ -48,6 +49,21 @@ pub enum Frame {
     },
     /// Coordinator and workers managing a run.
     Control(Control),
+    /// A producer task's batch for one consumer task, in emit order: as
+    /// that many `Tuple` frames, in one message (and, on a `block` edge,
+    /// under that many credits).
+    Tuples {
+        /// The sending process's host number.
+        sender: u16,
+        /// The edge.
+        edge: u32,
+        /// The sending task.
+        from: u32,
+        /// The receiving task.
+        to: u32,
+        /// The messages, each postcard-encoded as the stream's type.
+        payloads: Vec<Vec<u8>>,
+    },
 }
 
 /// A run as the coordinator ships it to a worker.
@@ -103,6 +119,8 @@ pub struct EdgeTraffic {
     pub edge: u32,
     /// Tuples sent.
     pub messages: u64,
+    /// Frames they were sent in.
+    pub frames: u64,
     /// Frame bytes sent.
     pub bytes: u64,
     /// Serializing, in nanoseconds.
@@ -327,6 +345,13 @@ mod tests {
             Frame::Control(Control::Ping { nonce: 77 }),
             Frame::Control(Control::Pong { nonce: 77, worker: "w1".into() }),
             Frame::Control(Control::Stop),
+            Frame::Tuples {
+                sender: 2,
+                edge: 1,
+                from: 1,
+                to: 0,
+                payloads: vec![vec![4; 30], vec![], vec![5; 200]],
+            },
         ]
     }
 

@@ -41,13 +41,13 @@ impl Target {
         let queue = match self {
             Target::Local(queue) => queue,
             #[cfg(feature = "cluster")]
-            Target::Remote(_) => {
-                // One tuple at a time across processes, each waiting for
-                // its credit.
-                for tuple in tuples.drain(..) {
-                    Box::pin(self.deliver(tuple, aborting, blocked)).await?;
-                }
-                return Ok(());
+            Target::Remote(remote) => {
+                // As few frames as the batch fits in, each under its
+                // credits.
+                return match Box::pin(remote.deliver_batch(tuples, wait, blocked)).await {
+                    Err(_) if aborting.load(Ordering::Relaxed) => Err(EmitError::ShuttingDown),
+                    other => other,
+                };
             }
         };
         let mut failed = Vec::new();

@@ -271,6 +271,7 @@ impl Gathered {
         for e in edges {
             let m = self.traffic.entry(e.edge).or_insert(EdgeTraffic { edge: e.edge, ..Default::default() });
             m.messages += e.messages;
+            m.frames += e.frames;
             m.bytes += e.bytes;
             m.encode_ns += e.encode_ns;
             m.decode_ns += e.decode_ns;
@@ -599,6 +600,7 @@ fn named_edges(names: &[EdgeName], traffic: Vec<EdgeTraffic>) -> Vec<EdgeReport>
                 stream,
                 to,
                 messages: t.messages,
+                frames: t.frames,
                 bytes: t.bytes,
                 encode_ms: t.encode_ns as f64 / 1e6,
                 decode_ms: t.decode_ns as f64 / 1e6,
@@ -619,6 +621,7 @@ fn edge_reports(layout: &Layout, topology: &Topology, traffic: HashMap<u32, Edge
                 stream: info.stream.to_string(),
                 to: topology.components[info.consumer].spec.name.clone(),
                 messages: t.messages,
+                frames: t.frames,
                 bytes: t.bytes,
                 encode_ms: t.encode_ns as f64 / 1e6,
                 decode_ms: t.decode_ns as f64 / 1e6,

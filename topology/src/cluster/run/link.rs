@@ -39,13 +39,14 @@ use crate::cluster::wire::{DEFAULT_MAX_FRAME, EdgeTraffic, Frame, Rejections, Wi
 use crate::error::EmitError;
 use crate::grouping::OverflowPolicy;
 use crate::message::CodecState;
-use crate::runtime::queue::{EdgeQueue, Push};
+use crate::runtime::queue::EdgeQueue;
 use crate::tuple::Tuple;
 
 /// Traffic counters of one edge in this process.
 #[derive(Debug, Default)]
 struct EdgeCounters {
     messages: AtomicU64,
+    frames: AtomicU64,
     bytes: AtomicU64,
     encode_ns: AtomicU64,
     decode_ns: AtomicU64,
@@ -169,6 +170,7 @@ impl Link {
             .map(|(edge, t)| EdgeTraffic {
                 edge: edge as u32,
                 messages: t.messages.load(Ordering::Relaxed),
+                frames: t.frames.load(Ordering::Relaxed),
                 bytes: t.bytes.load(Ordering::Relaxed),
                 encode_ns: t.encode_ns.load(Ordering::Relaxed),
                 decode_ns: t.decode_ns.load(Ordering::Relaxed),
@@ -232,14 +234,10 @@ impl Link {
     pub(crate) fn on_frame(&self, bytes: &[u8], inbound: &Inbound) {
         match Frame::decode(bytes, DEFAULT_MAX_FRAME) {
             Ok(Frame::Tuple { sender, edge, from, to, payload }) => {
-                if let Err(why) = self.accept(sender, (edge, from, to), &payload, inbound) {
-                    tracing::warn!("host {}: refused a tuple on edge {edge}: {why}", self.host);
-                    self.rejections.count(&why);
-                    // The sender counted it; refused, it is still received.
-                    if let Some(c) = self.received_from.get(usize::from(sender)) {
-                        c.fetch_add(1, Ordering::SeqCst);
-                    }
-                }
+                self.accept_all(sender, (edge, from, to), std::slice::from_ref(&payload), inbound);
+            }
+            Ok(Frame::Tuples { sender, edge, from, to, payloads }) => {
+                self.accept_all(sender, (edge, from, to), &payloads, inbound);
             }
             Ok(Frame::Credit { edge, from, to, n }) => match lock(&self.credits).get(&(edge, from, to)) {
                 Some(c) => c.add_permits(n as usize),
@@ -255,32 +253,66 @@ impl Link {
         }
     }
 
-    /// Decodes a tuple and hands it to its queue's forwarder; the error
-    /// says why the frame is refused.
-    fn accept(&self, sender: u16, pair: Pair, payload: &[u8], inbound: &Inbound) -> Result<(), WireError> {
-        let refused = |why: &str| WireError::Malformed(why.to_string());
+    /// Decodes the tuples of a frame, in order, and hands those that
+    /// decode to their queue's forwarder together. Each one refused is
+    /// logged and counted, and counted as received (the sender counted it
+    /// sent).
+    fn accept_all(&self, sender: u16, pair: Pair, payloads: &[Vec<u8>], inbound: &Inbound) {
         let (edge, from, to) = pair;
-        if usize::from(sender) >= self.received_from.len() {
-            return Err(refused(&format!("from host {sender}, which is not in the run")));
-        }
-        let info = self.layout.edges.get(edge as usize).ok_or_else(|| refused("no such edge"))?;
-        let source = *info.sources.get(from as usize).ok_or_else(|| refused("no such sending task"))?;
-        let forward = inbound
-            .forwarder(edge, to)
-            .ok_or_else(|| refused(&format!("task {to} of the consumer is not on this host")))?;
-        let started = Instant::now();
-        let decoded = match info.message.incremental_codec() {
-            None => info.message.decode(payload).map_err(|e| e.to_string()),
-            Some(codec) => {
-                let mut held = lock(&self.held);
-                (codec.decode)(payload, held.entry(pair).or_insert_with(codec.new_held))
-                    .map_err(|e| e.to_string())
+        let received = self.received_from.get(usize::from(sender));
+        let refuse = |why: WireError| {
+            tracing::warn!("host {}: refused a tuple on edge {edge}: {why}", self.host);
+            self.rejections.count(&why);
+            if let Some(c) = received {
+                c.fetch_add(1, Ordering::SeqCst);
+            }
+        };
+        let refused = |why: &str| WireError::Malformed(why.to_string());
+        let route = || {
+            if received.is_none() {
+                return Err(refused(&format!("from host {sender}, which is not in the run")));
+            }
+            let info = self.layout.edges.get(edge as usize).ok_or_else(|| refused("no such edge"))?;
+            let source = *info.sources.get(from as usize).ok_or_else(|| refused("no such sending task"))?;
+            let forward = inbound
+                .forwarder(edge, to)
+                .ok_or_else(|| refused(&format!("task {to} of the consumer is not on this host")))?;
+            Ok((info, source, forward))
+        };
+        let (info, source, forward) = match route() {
+            Ok(r) => r,
+            Err(why) => {
+                for _ in payloads {
+                    refuse(why.clone());
+                }
+                return;
+            }
+        };
+        let mut tuples = Vec::with_capacity(payloads.len());
+        for payload in payloads {
+            let started = Instant::now();
+            let decoded = match info.message.incremental_codec() {
+                None => info.message.decode(payload).map_err(|e| e.to_string()),
+                Some(codec) => {
+                    let mut held = lock(&self.held);
+                    (codec.decode)(payload, held.entry(pair).or_insert_with(codec.new_held))
+                        .map_err(|e| e.to_string())
+                }
+            };
+            self.traffic[edge as usize].decode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
+            match decoded {
+                Ok(payload) => tuples.push(Tuple { source, payload, anchor: None }),
+                Err(e) => refuse(refused(&format!("payload does not decode: {e}"))),
             }
         }
-        .map_err(|e| refused(&format!("payload does not decode: {e}")));
-        self.traffic[edge as usize].decode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
-        let tuple = Tuple { source, payload: decoded?, anchor: None };
-        forward.send(Forwarded { tuple, sender, from }).map_err(|_| refused("the run is over"))
+        if tuples.is_empty() {
+            return;
+        }
+        if let Err(lost) = forward.send(Forwarded { tuples, sender, from }) {
+            for _ in &lost.0.tuples {
+                refuse(refused("the run is over"));
+            }
+        }
     }
 }
 
@@ -295,7 +327,85 @@ pub(crate) struct RemoteTarget {
     credits: Option<Arc<Semaphore>>,
 }
 
+/// Most payload bytes gathered into one frame: a quarter of the frame
+/// limit, so that a batch of large messages (maps) goes as several
+/// frames; a single message past it goes alone.
+const FRAME_BUDGET: usize = DEFAULT_MAX_FRAME / 4;
+
 impl RemoteTarget {
+    /// Sends a producer's batch, in order, as few frames as the frame
+    /// budget and the edge's credits allow; on a `block` edge each frame
+    /// first waits for as many credits as it carries tuples (the wait is
+    /// added to `blocked`). Without `wait`, only what the credits at hand
+    /// cover is sent and the rest stays in `tuples`.
+    pub(crate) async fn deliver_batch(
+        &self,
+        tuples: &mut Vec<Tuple>,
+        wait: bool,
+        blocked: &mut Duration,
+    ) -> Result<(), EmitError> {
+        let link = &self.link;
+        let (edge, from, to) = self.pair;
+        let info = &link.layout.edges[edge as usize];
+        let counters = &link.traffic[edge as usize];
+        while !tuples.is_empty() {
+            // A frame never needs more credits than the edge has, nor,
+            // when it may not wait, more than there are now.
+            let most = match &self.credits {
+                None => usize::MAX,
+                Some(_) if wait => info.capacity.max(1),
+                Some(credits) => credits.available_permits(),
+            };
+            if most == 0 {
+                return Ok(());
+            }
+            let started = Instant::now();
+            let (mut payloads, mut bytes) = (Vec::new(), 0usize);
+            for tuple in tuples.iter() {
+                if payloads.len() == most || bytes >= FRAME_BUDGET {
+                    break;
+                }
+                let payload = match info.message.incremental_codec() {
+                    None => info.message.encode(&*tuple.payload).map_err(|e| e.to_string()),
+                    Some(codec) => {
+                        let mut records = lock(&link.sent_records);
+                        (codec.encode)(
+                            &*tuple.payload,
+                            records.entry(self.pair).or_insert_with(codec.new_sent),
+                        )
+                        .map_err(|e| e.to_string())
+                    }
+                }
+                .map_err(EmitError::Transport)?;
+                bytes += payload.len();
+                payloads.push(payload);
+            }
+            let n = payloads.len();
+            let frame = if n == 1 {
+                let payload = payloads.pop().expect("one");
+                Frame::Tuple { sender: link.host, edge, from, to, payload }.encode()
+            } else {
+                Frame::Tuples { sender: link.host, edge, from, to, payloads }.encode()
+            };
+            counters.encode_ns.fetch_add(nanos(started.elapsed()), Ordering::Relaxed);
+            if let Some(credits) = &self.credits {
+                let waited = Instant::now();
+                credits.acquire_many(n as u32).await.map_err(|_| EmitError::ShuttingDown)?.forget();
+                *blocked += waited.elapsed();
+            }
+            tuples.drain(..n);
+            counters.messages.fetch_add(n as u64, Ordering::Relaxed);
+            counters.frames.fetch_add(1, Ordering::Relaxed);
+            counters.bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
+            let host = link.layout.host(self.consumer, to as usize);
+            // Counted before they can arrive, so no look at the totals
+            // sees them received but not sent.
+            link.sent_to[usize::from(host)].fetch_add(n as u64, Ordering::SeqCst);
+            link.publish(host, frame).await.map_err(|e| EmitError::Transport(e.to_string()))?;
+        }
+        Ok(())
+    }
+
     /// Sends `tuple`, first waiting for a credit on a block edge (the wait
     /// is added to `blocked`).
     pub(crate) async fn deliver(&self, tuple: Tuple, blocked: &mut Duration) -> Result<(), EmitError> {
@@ -321,6 +431,7 @@ impl RemoteTarget {
             *blocked += waited.elapsed();
         }
         counters.messages.fetch_add(1, Ordering::Relaxed);
+        counters.frames.fetch_add(1, Ordering::Relaxed);
         counters.bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
         let host = link.layout.host(self.consumer, to as usize);
         // Counted before it can arrive, so no look at the totals sees it
@@ -330,9 +441,10 @@ impl RemoteTarget {
     }
 }
 
-/// A tuple on its way to its queue: the host and task that sent it.
+/// Tuples of one frame on their way to their queue: the host and task
+/// that sent them.
 struct Forwarded {
-    tuple: Tuple,
+    tuples: Vec<Tuple>,
     sender: u16,
     from: u32,
 }
@@ -372,12 +484,14 @@ impl Inbound {
             let link = link.clone();
             let (edge, to, block) = (edge as u32, t as u32, info.policy == OverflowPolicy::Block);
             runtime.spawn(async move {
-                while let Some(Forwarded { tuple, sender, from }) = receive.recv().await {
-                    let mut blocked = Duration::ZERO;
-                    let pushed = target.push(tuple, &mut blocked).await;
-                    link.received_from[usize::from(sender)].fetch_add(1, Ordering::SeqCst);
-                    if block && matches!(pushed, Push::Queued) {
-                        let credit = Frame::Credit { edge, from, to, n: 1 }.encode();
+                while let Some(Forwarded { mut tuples, sender, from }) = receive.recv().await {
+                    let (n, mut blocked, mut failed) = (tuples.len(), Duration::ZERO, Vec::new());
+                    // Tuples from another process carry no anchors, so
+                    // nothing dropped has a tree to fail.
+                    let closed = target.push_batch(&mut tuples, true, &mut blocked, &mut failed).await;
+                    link.received_from[usize::from(sender)].fetch_add(n as u64, Ordering::SeqCst);
+                    if block && !closed {
+                        let credit = Frame::Credit { edge, from, to, n: n as u32 }.encode();
                         if let Err(e) = link.publish(sender, credit).await {
                             tracing::warn!("cannot return a credit to host {sender}: {e}");
                         }
