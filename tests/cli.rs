@@ -228,6 +228,7 @@ fn a_restarted_bolt_waiting_for_input_is_not_a_stall() {
         .args(["run", "examples/topologies/probe.toml", "--out", dir.to_str().unwrap()])
         .args(["--set", "source.params={ count = 3, rate_hz = 0.5 }", "--set", "relay.params.panic_at=2"])
         .args(["--set", "relay.restart={ max_restarts = 1 }", "--set", "topology.stall_secs=1"])
+        .args(["--set", "topology.execute_sample=1"])
         .env("RUST_BACKTRACE", "0")
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
@@ -237,6 +238,10 @@ fn a_restarted_bolt_waiting_for_input_is_not_a_stall() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["status"], "completed");
     assert_eq!(metrics["components"][1]["restarts"], 1, "{metrics}");
+    // Every tuple timed, as the file asked and metrics.json says.
+    assert_eq!(metrics["execute_sample"], 1);
+    let sink = &metrics["components"][2];
+    assert_eq!(sink["execute"]["count"], sink["received"], "{sink}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

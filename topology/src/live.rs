@@ -109,6 +109,7 @@ pub struct LiveRun {
 struct Layout {
     topology: String,
     seed: u64,
+    execute_sample: usize,
     components: Vec<LiveComponent>,
 }
 
@@ -237,7 +238,12 @@ impl LiveRun {
                     .collect(),
             })
             .collect();
-        Layout { topology: topology.spec.name.clone(), seed: topology.spec.seed, components }
+        Layout {
+            topology: topology.spec.name.clone(),
+            seed: topology.spec.seed,
+            execute_sample: topology.spec.execute_sample,
+            components,
+        }
     }
 
     /// The tasks for which `here(component, task)` holds, as this process
@@ -343,6 +349,7 @@ impl LiveRun {
             None => RunReport {
                 topology: layout.topology.clone(),
                 seed: layout.seed,
+                execute_sample: layout.execute_sample,
                 wall_secs: elapsed.as_secs_f64(),
                 peak_rss_mb: crate::metrics::peak_rss_mb(),
                 components,

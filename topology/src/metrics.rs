@@ -273,6 +273,11 @@ pub struct RunReport {
     pub topology: String,
     /// Run seed.
     pub seed: u64,
+    /// How execute latencies were sampled: the first tuple of each batch
+    /// a task took, one in this many of the rest, and every tuple after
+    /// one that took 2 µs or more were timed (`[topology]
+    /// execute_sample`; 1: every tuple).
+    pub execute_sample: usize,
     /// Wall time of the run.
     pub wall_secs: f64,
     /// Peak resident memory of this process when the report was made,

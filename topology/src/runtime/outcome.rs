@@ -106,6 +106,7 @@ pub(crate) fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], w
     RunReport {
         topology: topology.spec.name.clone(),
         seed: topology.spec.seed,
+        execute_sample: topology.spec.execute_sample,
         wall_secs: wall.as_secs_f64(),
         peak_rss_mb: crate::metrics::peak_rss_mb(),
         components,
