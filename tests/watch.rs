@@ -246,7 +246,11 @@ fn the_foxglove_view_goes_live_and_into_an_mcap_file_with_every_reading() {
             .find_map(|l| Some(l.strip_prefix("Foxglove live view: ")?.split(' ').next()?.to_string()))
     };
     wait_for("the Foxglove view's address", Duration::from_secs(30), || url().is_some(), || stderr(&dir));
-    let topics = ["/scan", "/map", "/pose", "/tf", "/squall/metrics"];
+    // What a viewer must see live: the map, scans, poses, transforms. The
+    // once-a-second metrics are checked in the recording: a client slowed
+    // by the full suite's load has had every one of them dropped by the
+    // SDK's per-client queue (which drops the oldest, whatever the topic).
+    let topics = ["/scan", "/map", "/pose", "/tf"];
     let url = url().unwrap();
     let mut args = vec!["live", url.as_str()];
     args.extend(topics);
