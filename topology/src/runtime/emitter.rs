@@ -2,9 +2,11 @@
 //! input and records its own metrics.
 //!
 //! Routing happens here, on the emitting task's thread: the grouping picks
-//! the consumer task(s) and the tuple goes into that task's bounded queue.
-//! This is the transport boundary: a remote task would be another kind of
-//! target behind the same calls.
+//! the consumer task(s) and the tuple goes into this producer's batch for
+//! that task, handed over to the task's bounded queue as a whole (or at
+//! once, on an edge with batching off; see [`crate::spec::BatchSpec`] and
+//! decision 0032). This is the transport boundary: a task in another
+//! process is another kind of target behind the same calls.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

@@ -1,9 +1,10 @@
 //! The loop of one task, on its own thread.
 //!
 //! A bolt task takes a batch from one of its input queues (round-robin over
-//! its inputs), executes it, gives the room back, and sleeps when every queue
-//! is empty. A spout task calls `next` until the source is exhausted, settling
-//! acks and replaying failures in between. Both obey the coordinator's stage
+//! its inputs), executes it, hands over what it emitted (its held batches),
+//! gives the room back, and sleeps when every queue is empty. A spout task
+//! calls `next` until the source is exhausted, handing over its batches
+//! after each call, settling acks and replaying failures in between. Both obey the coordinator's stage
 //! (finish, exit, abort). A panic or error is caught here: the task restarts
 //! with a fresh instance if its policy allows, else the run fails.
 
