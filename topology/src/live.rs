@@ -1,13 +1,13 @@
 //! Metrics of a run while it runs: what a live page, a Prometheus scrape,
 //! a periodic `metrics.json` and the run log read before the run ends.
 //!
-//! Each task keeps its counters on its own thread ([`TaskStats`], plain
-//! integers) and publishes them to its [`TaskLive`] after every batch a
+//! Each task keeps its counters on its own thread (`TaskStats`, plain
+//! integers) and publishes them to its `TaskLive` after every batch a
 //! bolt executes and every `next` of a spout: relaxed stores of single
 //! words, no lock and no read-modify-write, so that watching costs the
 //! hot path next to nothing. What costs more (latency percentiles, which
 //! walk a histogram, and the component's own metrics, behind a lock) is
-//! published at most every [`DETAIL_PERIOD`]. Queue depths and drops are
+//! published at most every `DETAIL_PERIOD` (0.5 s). Queue depths and drops are
 //! read from the queues themselves. A reader takes a [`LiveSnapshot`] at
 //! any time; a [`Sampler`] turns two snapshots into rates.
 //!

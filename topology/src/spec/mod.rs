@@ -3,7 +3,7 @@
 //! The key names here are the file-format contract (see DESIGN.md). Unknown
 //! keys are rejected; every problem is reported with its file and line. Checks
 //! that need the components themselves (kinds, streams, types) happen in
-//! [`crate::plan`].
+//! the plan (`Topology::validate`).
 
 mod error;
 mod overrides;
