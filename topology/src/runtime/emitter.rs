@@ -194,13 +194,19 @@ impl Emitter {
 
     /// Emits `value` on `stream`.
     pub async fn emit<T: Message>(&mut self, stream: &str, value: T) -> Result<(), EmitError> {
-        let index = self.stream_index::<T>(stream)?;
-        self.emit_payload(index, Arc::new(value), None, None).await
+        self.emit_shared(stream, Arc::new(value)).await
     }
 
     /// Emits an already shared value (forwarding without a copy).
     pub async fn emit_shared<T: Message>(&mut self, stream: &str, value: Arc<T>) -> Result<(), EmitError> {
         let index = self.stream_index::<T>(stream)?;
+        if self.acking.is_none() && self.streams[index].held_only {
+            // The common case, without building the general path's
+            // futures: into the batches, awaiting only a full one.
+            self.stats.emitted += 1;
+            let full = self.hold(index, value, None, None)?;
+            return if full { Box::pin(self.flush(None)).await } else { Ok(()) };
+        }
         self.emit_payload(index, value, None, None).await
     }
 
