@@ -9,7 +9,10 @@ use prometheus_client::metrics::counter::ConstCounter;
 use prometheus_client::metrics::gauge::ConstGauge;
 use prometheus_client::registry::{Registry, Unit};
 use squall_topology::live::LiveSnapshot;
-use squall_topology::{CustomMetric, LiveRun, TaskReport};
+use squall_topology::{CustomMetric, EdgeReport, LiveRun, TaskReport};
+
+/// A counter of every cross-process edge: name, help, unit, value.
+type EdgeCounter = (&'static str, &'static str, Option<&'static Unit>, fn(&EdgeReport) -> u64);
 
 /// What a scrape of `/metrics` returns, as its content type says.
 pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
@@ -88,35 +91,29 @@ impl Collector for RunCollector {
                 ConstGauge::new(value(t, st)).encode(family.encode_family(&labels)?)
             })?;
         }
-        let mut messages = encoder.encode_descriptor(
-            "edge_messages",
-            "Tuples sent between processes on an edge (cluster runs)",
-            None,
-            ConstCounter::<u64>::new(0).metric_type(),
-        )?;
-        for e in &s.edges {
-            let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
-            ConstCounter::new(e.messages).encode(messages.encode_family(&labels)?)?;
-        }
-        let mut frames = encoder.encode_descriptor(
-            "edge_frames",
-            "Frames the tuples of an edge travelled in between processes (a batch is one)",
-            None,
-            ConstCounter::<u64>::new(0).metric_type(),
-        )?;
-        for e in &s.edges {
-            let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
-            ConstCounter::new(e.frames).encode(frames.encode_family(&labels)?)?;
-        }
-        let mut bytes = encoder.encode_descriptor(
-            "edge",
-            "Bytes sent between processes on an edge (cluster runs)",
-            Some(&Unit::Bytes),
-            ConstCounter::<u64>::new(0).metric_type(),
-        )?;
-        for e in &s.edges {
-            let labels = [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
-            ConstCounter::new(e.bytes).encode(bytes.encode_family(&labels)?)?;
+        // Traffic between processes, per edge (cluster runs).
+        let edge_counters: [EdgeCounter; 3] = [
+            ("edge_messages", "Tuples sent between processes on an edge (cluster runs)", None, |e| {
+                e.messages
+            }),
+            (
+                "edge_frames",
+                "Frames the tuples of an edge travelled in between processes (a batch is one)",
+                None,
+                |e| e.frames,
+            ),
+            ("edge", "Bytes sent between processes on an edge (cluster runs)", Some(&Unit::Bytes), |e| {
+                e.bytes
+            }),
+        ];
+        for (name, help, unit, value) in edge_counters {
+            let mut family =
+                encoder.encode_descriptor(name, help, unit, ConstCounter::<u64>::new(0).metric_type())?;
+            for e in &s.edges {
+                let labels =
+                    [("from", e.from.as_str()), ("stream", e.stream.as_str()), ("to", e.to.as_str())];
+                ConstCounter::new(value(e)).encode(family.encode_family(&labels)?)?;
+            }
         }
         let mut family = encoder.encode_descriptor(
             "component_counter",

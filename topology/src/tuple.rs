@@ -46,6 +46,14 @@ impl Tuple {
         self.payload.is::<T>()
     }
 
+    /// Gives up a tuple that will not be executed (dropped, refused,
+    /// discarded): its acking tree, if it has one, fails.
+    pub(crate) fn lost(self) {
+        if let Some(a) = self.anchor {
+            a.fail();
+        }
+    }
+
     /// The message as a shared `T` (to forward it without copying), or the
     /// tuple back if it is not a `T`.
     pub fn into_arc<T: Send + Sync + 'static>(self) -> Result<Arc<T>, Tuple> {

@@ -154,9 +154,11 @@ pub struct Emitter {
     pub(crate) clock: Instant,
     /// Tuples held in batches, over every target.
     held: usize,
-    /// `held` as the coordinator reads it: published before the task
-    /// releases its input and after every hand-over, so that no look at
-    /// the run sees it quiescent while a tuple is held.
+    /// `held` as the coordinator reads it: published at the end of every
+    /// flush that found tuples held, so equal to `held` after any flush.
+    /// A task flushes before it releases its input, ends a tick, reports
+    /// `finish` or waits, so no look at the run sees it quiescent while a
+    /// tuple is held.
     pub(crate) held_now: Arc<AtomicU64>,
     task: usize,
 }
@@ -354,8 +356,6 @@ impl Emitter {
         if direct.is_none() && stream.has_direct {
             return Err(EmitError::DirectNeedsTask(stream.name.to_string()));
         }
-        // The payload is moved into the last delivery rather than cloned and
-        // then dropped here: one reference-count round trip less per tuple.
         let mut payload = Some(payload);
         // Whether a batch reached its bound.
         let mut full = false;
@@ -365,13 +365,8 @@ impl Emitter {
             let targets = sub.pick(stream.message, &**shared, direct)?;
             let last = targets.end - 1;
             for i in targets {
-                let payload = if k + 1 == subscriptions && i == last {
-                    payload.take().expect("taken once")
-                } else {
-                    payload.as_ref().expect("present until the last delivery").clone()
-                };
                 let tuple =
-                    Tuple { source: stream.source, payload, anchor: parent.map(|a| Box::new(a.child())) };
+                    delivery(stream.source, &mut payload, k + 1 == subscriptions && i == last, parent);
                 if sub.batch.is_off() {
                     let blocked = self.stats.blocked;
                     let delivered =
@@ -409,13 +404,8 @@ impl Emitter {
             let targets = sub.pick(stream.message, &**shared, direct)?;
             let last = targets.end - 1;
             for i in targets {
-                let payload = if k + 1 == subscriptions && i == last {
-                    payload.take().expect("taken once")
-                } else {
-                    payload.as_ref().expect("present until the last delivery").clone()
-                };
                 let tuple =
-                    Tuple { source: stream.source, payload, anchor: parent.map(|a| Box::new(a.child())) };
+                    delivery(stream.source, &mut payload, k + 1 == subscriptions && i == last, parent);
                 full |= sub.hold(i, tuple, self.clock);
                 self.held += 1;
             }
@@ -434,6 +424,9 @@ impl Emitter {
             return Ok(());
         }
         for wait in [false, true] {
+            if self.held == 0 {
+                break;
+            }
             for stream in &mut self.streams {
                 for sub in &mut stream.subscriptions {
                     let linger = sub.batch.linger;
@@ -464,7 +457,7 @@ impl Emitter {
 
     /// Publishes how many tuples are held, for the coordinator's look at
     /// the run.
-    pub(crate) fn publish_held(&self) {
+    fn publish_held(&self) {
         self.held_now.store(self.held as u64, Ordering::SeqCst);
     }
 
@@ -487,6 +480,23 @@ impl Emitter {
     pub(crate) async fn replay(&mut self, r: Replay) -> Result<(), EmitError> {
         self.emit_payload(r.stream, r.payload, None, Some((r.seq, r.attempt + 1))).await
     }
+}
+
+/// The tuple of one delivery of `payload`: the payload is moved into the
+/// `last` delivery rather than cloned and then dropped (one reference-count
+/// round trip less per tuple); each carries a child of `parent`.
+fn delivery(
+    source: &'static Source,
+    payload: &mut Option<Payload>,
+    last: bool,
+    parent: Option<&Anchor>,
+) -> Tuple {
+    let payload = if last {
+        payload.take().expect("taken once")
+    } else {
+        payload.as_ref().expect("present until the last delivery").clone()
+    };
+    Tuple { source, payload, anchor: parent.map(|a| Box::new(a.child())) }
 }
 
 /// After a delivery: if it waited for queue space (the blocked time grew

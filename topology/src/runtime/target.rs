@@ -44,19 +44,15 @@ impl Target {
             Target::Remote(remote) => {
                 // As few frames as the batch fits in, each under its
                 // credits.
-                return match Box::pin(remote.deliver_batch(tuples, wait, blocked)).await {
-                    Err(_) if aborting.load(Ordering::Relaxed) => Err(EmitError::ShuttingDown),
-                    other => other,
-                };
+                return shutting_down_if(
+                    aborting,
+                    Box::pin(remote.deliver_batch(tuples, wait, blocked)).await,
+                );
             }
         };
         let mut failed = Vec::new();
         let closed = queue.push_batch(tuples, wait, blocked, &mut failed).await;
-        for t in failed {
-            if let Some(a) = t.anchor {
-                a.fail();
-            }
-        }
+        failed.into_iter().for_each(Tuple::lost);
         if closed && aborting.load(Ordering::Relaxed) { Err(EmitError::ShuttingDown) } else { Ok(()) }
     }
 
@@ -73,11 +69,7 @@ impl Target {
             #[cfg(feature = "cluster")]
             Target::Remote(_) => {}
         }
-        for t in tuples.drain(..) {
-            if let Some(a) = t.anchor {
-                a.fail();
-            }
-        }
+        tuples.drain(..).for_each(Tuple::lost);
     }
 
     /// Delivers `tuple`, waiting under `block` (the wait is added to
@@ -96,26 +88,29 @@ impl Target {
             Target::Remote(remote) => {
                 // Cluster runs refuse acking topologies that span
                 // processes, so a remote tuple has no anchor.
-                return match remote.deliver(tuple, blocked).await {
-                    Err(_) if aborting.load(Ordering::Relaxed) => Err(EmitError::ShuttingDown),
-                    other => other,
-                };
+                return shutting_down_if(aborting, remote.deliver(tuple, blocked).await);
             }
         };
         match queue.push(tuple, blocked).await {
             Push::Queued => Ok(()),
             Push::Dropped(victim) => {
-                if let Some(a) = victim.anchor {
-                    a.fail();
-                }
+                victim.lost();
                 Ok(())
             }
             Push::Closed(refused) => {
-                if let Some(a) = refused.anchor {
-                    a.fail();
-                }
+                refused.lost();
                 if aborting.load(Ordering::Relaxed) { Err(EmitError::ShuttingDown) } else { Ok(()) }
             }
         }
+    }
+}
+
+/// A failed send to another process is the run shutting down when it is
+/// aborting (the link closed under it), else the error itself.
+#[cfg(feature = "cluster")]
+fn shutting_down_if(aborting: &AtomicBool, result: Result<(), EmitError>) -> Result<(), EmitError> {
+    match result {
+        Err(_) if aborting.load(Ordering::Relaxed) => Err(EmitError::ShuttingDown),
+        other => other,
     }
 }

@@ -37,8 +37,8 @@ use crate::tuple::Tuple;
 /// its producers handed over (a batch of up to 256 by default) in one go.
 const MAX_BATCH: usize = 256;
 /// A tuple whose execute took this long has the next one timed too: a
-/// clock read (about 25 ns) is then 1% of the work, and a slow bolt's
-/// ticks and stall watchdog see every tuple.
+/// clock read (a vDSO call of tens of nanoseconds) is then small beside
+/// the work, and a slow bolt's ticks and stall watchdog see every tuple.
 const TIME_EACH_ABOVE: Duration = Duration::from_micros(2);
 /// Polls of the input queues before an idle bolt task parks.
 const SPINS: usize = 8;
@@ -197,11 +197,7 @@ impl BoltTask {
                 continue;
             }
             self.inbox[from].counters.undelivered.fetch_add(queue.len() as u64, Ordering::Relaxed);
-            for tuple in queue.drain(..) {
-                if let Some(a) = tuple.anchor {
-                    a.fail();
-                }
-            }
+            queue.drain(..).for_each(Tuple::lost);
         }
     }
 
@@ -258,17 +254,15 @@ async fn tick<B: Bolt>(
         t.common.emitter.clock = start;
         let result = bolt.tick(&mut t.common.emitter).await;
         control.call_ended();
-        // What the tick emitted, and whatever was held, is handed over.
-        let flushed = match result {
-            Ok(()) => t.common.emitter.flush(None).await.map_err(BoxError::from),
-            Err(e) => Err(e),
-        };
+        // What the tick emitted (a failed one too: its emits stand, as
+        // they would unbatched), and whatever was held, is handed over
+        // before the tick is over.
+        let flushed = t.common.emitter.flush(None).await;
         t.busy_until(start, blocked_before, Instant::now());
-        flushed
+        result.and(flushed.map_err(BoxError::from))
     } else {
         Ok(())
     };
-    t.common.emitter.publish_held();
     control.ticking.store(false, Ordering::SeqCst);
     result
 }
@@ -343,7 +337,8 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
             t.busy_until(end, flush_blocked, Instant::now());
         }
         t.common.publish(end);
-        t.common.emitter.publish_held();
+        // The flush published what is still held (what lingers): the
+        // input it came from can be given back.
         t.release_batch();
         let stage = t.common.control.stage();
         if stage >= Stage::Abort {
@@ -636,11 +631,7 @@ pub(crate) fn bolt_thread(
     task.discard_taken();
     task.release_batch();
     for q in &task.inbox {
-        for t in q.close() {
-            if let Some(a) = t.anchor {
-                a.fail();
-            }
-        }
+        q.close().into_iter().for_each(Tuple::lost);
     }
     finish_thread(&mut task.common, failure, started, &task.inbox)
 }

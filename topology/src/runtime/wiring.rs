@@ -262,11 +262,7 @@ impl Wiring {
     /// acking trees.
     pub(crate) fn close_queues(&self) {
         for q in self.all_queues() {
-            for t in q.close() {
-                if let Some(a) = t.anchor {
-                    a.fail();
-                }
-            }
+            q.close().into_iter().for_each(crate::tuple::Tuple::lost);
         }
     }
 }

@@ -595,16 +595,7 @@ fn named_edges(names: &[EdgeName], traffic: Vec<EdgeTraffic>) -> Vec<EdgeReport>
         .into_iter()
         .filter_map(|t| {
             let (from, stream, to) = names.get(t.edge as usize)?.clone();
-            Some(EdgeReport {
-                from,
-                stream,
-                to,
-                messages: t.messages,
-                frames: t.frames,
-                bytes: t.bytes,
-                encode_ms: t.encode_ns as f64 / 1e6,
-                decode_ms: t.decode_ns as f64 / 1e6,
-            })
+            Some(edge_report(from, stream, to, &t))
         })
         .collect()
 }
@@ -616,16 +607,22 @@ fn edge_reports(layout: &Layout, topology: &Topology, traffic: HashMap<u32, Edge
         .into_iter()
         .filter_map(|t| {
             let info = layout.edges.get(t.edge as usize)?;
-            Some(EdgeReport {
-                from: topology.components[info.producer].spec.name.clone(),
-                stream: info.stream.to_string(),
-                to: topology.components[info.consumer].spec.name.clone(),
-                messages: t.messages,
-                frames: t.frames,
-                bytes: t.bytes,
-                encode_ms: t.encode_ns as f64 / 1e6,
-                decode_ms: t.decode_ns as f64 / 1e6,
-            })
+            let name = |c: usize| topology.components[c].spec.name.clone();
+            Some(edge_report(name(info.producer), info.stream.to_string(), name(info.consumer), &t))
         })
         .collect()
+}
+
+/// One edge's traffic as the report has it.
+fn edge_report(from: String, stream: String, to: String, t: &EdgeTraffic) -> EdgeReport {
+    EdgeReport {
+        from,
+        stream,
+        to,
+        messages: t.messages,
+        frames: t.frames,
+        bytes: t.bytes,
+        encode_ms: t.encode_ns as f64 / 1e6,
+        decode_ms: t.decode_ns as f64 / 1e6,
+    }
 }
