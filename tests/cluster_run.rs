@@ -397,3 +397,31 @@ fn losing_a_spout_s_worker_fails_the_run_naming_the_spout() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_source_failing_with_tuples_held_for_another_process_counts_them_undelivered() {
+    // The source (here) fails at its 5000th message: the 135 it emitted
+    // in that call wait in its batch for the relay on w1 and are never
+    // sent. They count as undelivered at the relay, so every emit is
+    // still accounted for.
+    let workers = Workers::start(1);
+    let cluster = workers.cluster_file("relay = [\"w1\"]");
+    let out = tempfile::tempdir().unwrap();
+    let args = ["run", "examples/topologies/probe.toml", "--quiet", "--set", "source.params.fail_at=5000"];
+    let mut args = args.to_vec();
+    args.extend(["--out", out.path().to_str().unwrap(), "--cluster", cluster.to_str().unwrap()]);
+    let done = squall_on(&workers, &args);
+    let stderr = text(&done.stderr);
+    assert_eq!(done.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("injected source error at message 5000"), "{stderr}");
+    let m = metrics(out.path());
+    let count = |name: &str, key: &str| component(&m, name)[key].as_u64().unwrap();
+    assert_eq!(count("source", "emitted"), 4999);
+    let unsent = 4999 % 256;
+    let edge = m["edges"].as_array().unwrap().iter().find(|e| e["to"] == "relay").expect("the edge to w1");
+    assert_eq!(edge["undelivered"], unsent, "{edge}");
+    assert_eq!(edge["messages"].as_u64().unwrap() + unsent, 4999, "{edge}");
+    let lost = count("relay", "dropped") + count("relay", "undelivered");
+    assert_eq!(count("relay", "received") + lost, 4999, "relay: {}", component(&m, "relay"));
+    assert!(lost >= unsent, "relay: {}", component(&m, "relay"));
+}

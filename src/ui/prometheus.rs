@@ -92,7 +92,7 @@ impl Collector for RunCollector {
             })?;
         }
         // Traffic between processes, per edge (cluster runs).
-        let edge_counters: [EdgeCounter; 3] = [
+        let edge_counters: [EdgeCounter; 4] = [
             ("edge_messages", "Tuples sent between processes on an edge (cluster runs)", None, |e| {
                 e.messages
             }),
@@ -105,6 +105,12 @@ impl Collector for RunCollector {
             ("edge", "Bytes sent between processes on an edge (cluster runs)", Some(&Unit::Bytes), |e| {
                 e.bytes
             }),
+            (
+                "edge_undelivered",
+                "Tuples held for a task in another process and never sent: their producer ended first",
+                None,
+                |e| e.undelivered,
+            ),
         ];
         for (name, help, unit, value) in edge_counters {
             let mut family =

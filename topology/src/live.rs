@@ -377,6 +377,7 @@ impl LiveRun {
             sum.bytes += e.bytes;
             sum.encode_ms += e.encode_ms;
             sum.decode_ms += e.decode_ms;
+            sum.undelivered += e.undelivered;
         }
         Some(LiveSnapshot {
             elapsed_secs: elapsed.as_secs_f64(),

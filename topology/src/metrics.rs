@@ -316,6 +316,10 @@ pub struct EdgeReport {
     pub encode_ms: f64,
     /// Time spent deserializing them, in total.
     pub decode_ms: f64,
+    /// Tuples a producer task held for a task in another process and
+    /// never sent, because it ended first (a failure, an abort); also
+    /// counted in the consumer's `undelivered`.
+    pub undelivered: u64,
 }
 
 /// What the runtime collected for one task.

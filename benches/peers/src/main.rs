@@ -164,6 +164,38 @@ fn channels(messages: u64, per_send: usize, heap: bool) -> Duration {
     started.elapsed()
 }
 
+/// Three threads joined by `bounded(1024)` channels, 256 records per
+/// send, each record in its own `Arc<dyn Any>` as squall shares a
+/// message (allocated by the source, freed by the sink): the floor that
+/// payload representation sets, whatever the engine around it does.
+fn channels_arc(messages: u64) -> Duration {
+    type Shared = std::sync::Arc<dyn std::any::Any + Send + Sync>;
+    const PER_SEND: u64 = 256;
+    let started = Instant::now();
+    let (tx, rx) = crossbeam_channel::bounded::<Vec<Shared>>(1024);
+    let (tx2, rx2) = crossbeam_channel::bounded::<Vec<Shared>>(1024);
+    let source = std::thread::spawn(move || {
+        let mut seq = 0;
+        while seq < messages {
+            let n = (messages - seq).min(PER_SEND);
+            tx.send((seq..seq + n).map(|s| std::sync::Arc::new(record(s)) as Shared).collect()).unwrap();
+            seq += n;
+        }
+    });
+    let relay = std::thread::spawn(move || {
+        rx.iter().for_each(|batch| {
+            let out: Vec<Shared> =
+                batch.into_iter().map(|r| r.downcast::<Record>().expect("a record") as Shared).collect();
+            tx2.send(out).unwrap()
+        })
+    });
+    let seen = rx2.iter().map(|b| b.iter().filter(|r| r.is::<Record>()).count() as u64).sum::<u64>();
+    source.join().unwrap();
+    relay.join().unwrap();
+    assert_eq!(seen, messages);
+    started.elapsed()
+}
+
 struct System {
     name: &'static str,
     run: Box<dyn Fn(u64) -> Duration>,
@@ -221,6 +253,11 @@ fn main() {
         System {
             name: "3 threads, bounded(1024), 1024 per send",
             run: Box::new(|m| channels(m, 1024, false)),
+            rates: vec![],
+        },
+        System {
+            name: "3 threads, 256 per send, a shared Arc per record",
+            run: Box::new(channels_arc),
             rates: vec![],
         },
         System {

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 const MAGIC: [u8; 2] = *b"SQ";
 /// The frame format; a peer speaking another is refused (2: batches of
 /// tuples travel as one frame).
-pub const WIRE_VERSION: u8 = 2;
+pub const WIRE_VERSION: u8 = 3;
 /// Frames larger than this are refused unread, unless the cluster sets
 /// another limit: a map with its tiles fits many times over.
 pub const DEFAULT_MAX_FRAME: usize = 64 << 20;
@@ -127,6 +127,9 @@ pub struct EdgeTraffic {
     pub encode_ns: u64,
     /// Deserializing at the receivers of this process, in nanoseconds.
     pub decode_ns: u64,
+    /// Tuples held for a task in another process and never sent: their
+    /// producer task ended (failed, or the run aborted) first.
+    pub undelivered: u64,
 }
 
 /// Run management between the coordinator and its workers.

@@ -61,7 +61,7 @@ impl Subscription {
         Ok(match &self.route {
             Route::RoundRobin => {
                 let i = self.next;
-                self.next = (i + 1) % n;
+                self.next = if i + 1 == n { 0 } else { i + 1 };
                 i..i + 1
             }
             Route::Fields(fields) => {

@@ -82,17 +82,33 @@ pub(crate) fn finish_run(
 }
 
 pub(crate) fn build_report(topology: &Topology, outcomes: &[Vec<TaskOutcome>], wall: Duration) -> RunReport {
-    let components: Vec<_> = topology
+    build_report_with_unsent(topology, outcomes, wall, &[])
+}
+
+/// The run's report, where `unsent` lists, per consumer component, tuples
+/// held for its tasks in another process and never sent (their producer
+/// ended first): they count in the consumer's `undelivered`.
+pub(crate) fn build_report_with_unsent(
+    topology: &Topology,
+    outcomes: &[Vec<TaskOutcome>],
+    wall: Duration,
+    unsent: &[(usize, u64)],
+) -> RunReport {
+    let mut components: Vec<_> = topology
         .components
         .iter()
         .zip(outcomes)
         .map(|(p, o)| component_report(&p.spec.name, &p.spec.kind, p.spec.role, o))
         .collect();
+    for &(consumer, n) in unsent {
+        components[consumer].undelivered += n;
+    }
     let mut warnings = Vec::new();
     for c in &components {
         if c.undelivered > 0 {
             warnings.push(format!(
-                "{} \"{}\": {} tuples arrived after it had exited or at an abort and were not executed",
+                "{} \"{}\": {} tuples sent to it were not executed (they arrived after it had exited or \
+                 at an abort, or their producer ended holding them)",
                 c.role, c.name, c.undelivered
             ));
         }

@@ -64,10 +64,10 @@ impl Target {
             Target::Local(queue) => {
                 queue.counters.undelivered.fetch_add(tuples.len() as u64, Ordering::Relaxed);
             }
-            // The receiving process never saw them: nothing counts them
-            // there (the emits were counted here).
+            // The receiving process never saw them: the edge counts them
+            // here, and the run's report adds them to the consumer's.
             #[cfg(feature = "cluster")]
-            Target::Remote(_) => {}
+            Target::Remote(remote) => remote.abandon(tuples.len()),
         }
         tuples.drain(..).for_each(Tuple::lost);
     }

@@ -22,7 +22,7 @@ use crate::plan::Topology;
 use crate::runtime::control::{Event, EventKind, Stage, TaskFailure};
 
 use crate::runtime::coordinator::{Coordinator, Hosts};
-use crate::runtime::outcome::{build_report, finish_run};
+use crate::runtime::outcome::{build_report_with_unsent, finish_run};
 use crate::runtime::threads::lost_outcome;
 use crate::runtime::{RunError, RunOptions};
 
@@ -275,6 +275,7 @@ impl Gathered {
             m.bytes += e.bytes;
             m.encode_ns += e.encode_ns;
             m.decode_ns += e.decode_ns;
+            m.undelivered += e.undelivered;
         }
     }
 
@@ -337,7 +338,13 @@ impl Gathered {
             .into_iter()
             .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
             .collect();
-        let mut report = build_report(topology, &outcomes, elapsed);
+        let unsent: Vec<(usize, u64)> = self
+            .traffic
+            .values()
+            .filter(|t| t.undelivered > 0)
+            .filter_map(|t| Some((layout.edges.get(t.edge as usize)?.consumer, t.undelivered)))
+            .collect();
+        let mut report = build_report_with_unsent(topology, &outcomes, elapsed, &unsent);
         let mut warnings = self.warnings;
         report.warnings.append(&mut warnings);
         let (large, bad) = self.refused;
@@ -624,5 +631,6 @@ fn edge_report(from: String, stream: String, to: String, t: &EdgeTraffic) -> Edg
         bytes: t.bytes,
         encode_ms: t.encode_ns as f64 / 1e6,
         decode_ms: t.decode_ns as f64 / 1e6,
+        undelivered: t.undelivered,
     }
 }

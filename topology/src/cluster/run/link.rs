@@ -50,6 +50,9 @@ struct EdgeCounters {
     bytes: AtomicU64,
     encode_ns: AtomicU64,
     decode_ns: AtomicU64,
+    /// Tuples held for a task in another process and never sent: their
+    /// producer task ended (failed, or the run aborted) first.
+    undelivered: AtomicU64,
 }
 
 fn nanos(d: Duration) -> u64 {
@@ -166,7 +169,10 @@ impl Link {
         self.traffic
             .iter()
             .enumerate()
-            .filter(|(_, t)| t.messages.load(Ordering::Relaxed) + t.decode_ns.load(Ordering::Relaxed) > 0)
+            .filter(|(_, t)| {
+                let seen = [&t.messages, &t.decode_ns, &t.undelivered];
+                seen.iter().any(|c| c.load(Ordering::Relaxed) > 0)
+            })
             .map(|(edge, t)| EdgeTraffic {
                 edge: edge as u32,
                 messages: t.messages.load(Ordering::Relaxed),
@@ -174,6 +180,7 @@ impl Link {
                 bytes: t.bytes.load(Ordering::Relaxed),
                 encode_ns: t.encode_ns.load(Ordering::Relaxed),
                 decode_ns: t.decode_ns.load(Ordering::Relaxed),
+                undelivered: t.undelivered.load(Ordering::Relaxed),
             })
             .collect()
     }
@@ -404,6 +411,13 @@ impl RemoteTarget {
             link.publish(host, frame).await.map_err(|e| EmitError::Transport(e.to_string()))?;
         }
         Ok(())
+    }
+
+    /// Counts `n` tuples held for this target that will never be sent
+    /// (their producer task ended first) as undelivered on the edge.
+    pub(crate) fn abandon(&self, n: usize) {
+        let (edge, _, _) = self.pair;
+        self.link.traffic[edge as usize].undelivered.fetch_add(n as u64, Ordering::Relaxed);
     }
 
     /// Sends `tuple`, first waiting for a credit on a block edge (the wait
