@@ -27,7 +27,9 @@ use serde::Deserialize;
 use squall_core::geometry::Pose2;
 use squall_core::occupancy::OccupancyGrid;
 use squall_core::sensor::{LaserReading, PoseStamped};
-use squall_topology::cluster::config::{TlsSpec, mismatched_endpoint};
+use squall_topology::cluster::config::{
+    LIVE_LINK_RISK, TlsSpec, exposed_endpoint, exposure_refusal, exposure_warning, mismatched_endpoint,
+};
 use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
 use squall_topology::{
     Bolt, BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
@@ -110,6 +112,10 @@ struct LinkParams {
     #[serde(default)]
     format: Format,
     tls: Option<TlsParams>,
+    /// Allows plain `tcp/` endpoints beyond loopback, without mutual TLS
+    /// (a network the user trusts); every run then warns.
+    #[serde(default)]
+    insecure: bool,
     /// ROS domain id (`ROS_DOMAIN_ID`).
     #[serde(default)]
     domain_id: u32,
@@ -132,6 +138,9 @@ struct LinkParams {
 #[derive(Debug)]
 struct Link {
     options: SessionOptions,
+    /// What to warn of: the plain endpoints beyond loopback that
+    /// `insecure = true` allowed.
+    warnings: Vec<String>,
     format: Format,
     domain: u32,
     node: String,
@@ -149,8 +158,18 @@ fn topic(what: &str, name: &str) -> Result<String, ParamError> {
 impl Link {
     fn from_params(p: LinkParams) -> Result<Link, ParamError> {
         rmw_zenoh::node_name(&p.node).map_err(|e| ParamError::new(format!("node: {e}")))?;
+        let options = session_options(&p.listen, &p.connect, p.tls)?;
+        let endpoints = || options.listen.iter().chain(&options.connect);
+        if let Some(exposed) = exposed_endpoint(endpoints())
+            && !p.insecure
+        {
+            return Err(ParamError::new(exposure_refusal(exposed, LIVE_LINK_RISK, "set `insecure = true`")));
+        }
+        let warnings =
+            endpoints().filter(|e| e.is_exposed()).map(|e| exposure_warning(e, LIVE_LINK_RISK)).collect();
         Ok(Link {
-            options: session_options(&p.listen, &p.connect, p.tls)?,
+            options,
+            warnings,
             format: p.format,
             domain: p.domain_id,
             node: p.node,
@@ -213,11 +232,12 @@ fn no_unknown(unknown: &toml::Table, known: &[&str]) -> Result<(), ParamError> {
     }
 }
 
-const LINK_FIELDS: [&str; 10] = [
+const LINK_FIELDS: [&str; 11] = [
     "listen",
     "connect",
     "format",
     "tls",
+    "insecure",
     "domain_id",
     "node",
     "odom_topic",
@@ -337,6 +357,7 @@ async fn next_of(subscriber: &FifoChannelHandler<Sample>) -> Option<Sample> {
 impl Spout for LiveIngest {
     fn declare(&self, d: &mut Declarer) {
         d.output::<LaserReading>("scan");
+        self.link.warnings.iter().for_each(|w| _ = d.warn(w.clone()));
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
@@ -588,6 +609,7 @@ impl LivePublish {
 impl Bolt for LivePublish {
     fn declare(&self, d: &mut Declarer) {
         d.input::<PoseStamped>().input::<OccupancyGrid>();
+        self.link.warnings.iter().for_each(|w| _ = d.warn(w.clone()));
     }
 
     async fn prepare(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {

@@ -15,6 +15,9 @@ use squall_spouts::live::node::RosNode;
 use squall_spouts::live::{Format, MAP_TOPIC, ODOM_TOPIC, POSE_TOPIC, SCAN_TOPIC, squall_key};
 use squall_spouts::rmw_zenoh::{self, Qos};
 use squall_spouts::rosbag2::messages;
+use squall_topology::cluster::config::{
+    LIVE_LINK_RISK, exposed_endpoint, exposure_refusal, exposure_warning,
+};
 use squall_topology::cluster::session::{SessionOptions, endpoints, open};
 
 use super::tls::TlsArgs;
@@ -46,6 +49,11 @@ pub(super) struct RobotArgs {
     connect_secs: f64,
     #[command(flatten)]
     tls: TlsArgs,
+    /// Allow a plain tcp/ endpoint beyond loopback, without mutual TLS: on
+    /// a network you trust only (anyone on it can read the scans and send
+    /// false poses). Warns at start.
+    #[arg(long)]
+    insecure: bool,
 }
 
 /// A stamp as a key that survives CDR's seconds + nanoseconds.
@@ -69,6 +77,16 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
+    if let Some(exposed) = exposed_endpoint(&connect) {
+        if !args.insecure {
+            eprintln!("squall robot: {}", exposure_refusal(exposed, LIVE_LINK_RISK, "pass --insecure"));
+            return ExitCode::from(EXIT_INVALID);
+        }
+        for e in connect.iter().filter(|e| e.is_exposed()) {
+            let warning = exposure_warning(e, LIVE_LINK_RISK);
+            eprintln!("squall robot: WARNING: {warning} (--insecure)");
+        }
+    }
     if !(args.speed.is_finite() && args.speed > 0.0) {
         eprintln!("squall robot: --speed {}: expected a factor > 0", args.speed);
         return ExitCode::from(EXIT_INVALID);

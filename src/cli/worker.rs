@@ -6,7 +6,9 @@
 use std::process::ExitCode;
 
 use squall_topology::RunOptions;
-use squall_topology::cluster::config::Endpoint;
+use squall_topology::cluster::config::{
+    Endpoint, WORKER_RISK, exposed_endpoint, exposure_refusal, exposure_warning,
+};
 use squall_topology::cluster::run::host_run;
 use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, reply_key, worker_key};
 
@@ -26,6 +28,11 @@ pub(super) struct WorkerArgs {
     out: Option<std::path::PathBuf>,
     #[command(flatten)]
     tls: TlsArgs,
+    /// Allow plain tcp/ endpoints beyond loopback, without mutual TLS: on
+    /// a network you trust only (anyone who reaches the port can make the
+    /// worker run plans). Warns at start.
+    #[arg(long)]
+    insecure: bool,
 }
 
 /// Runs `squall worker`.
@@ -42,6 +49,17 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
+    let endpoints = || std::iter::once(&listen).chain(&connect);
+    if let Some(exposed) = exposed_endpoint(endpoints()) {
+        if !args.insecure {
+            eprintln!("squall worker: {}", exposure_refusal(exposed, WORKER_RISK, "pass --insecure"));
+            return ExitCode::from(EXIT_INVALID);
+        }
+        for e in endpoints().filter(|e| e.is_exposed()) {
+            let warning = exposure_warning(e, WORKER_RISK);
+            eprintln!("squall worker: WARNING: {warning} (--insecure)");
+        }
+    }
     let options = SessionOptions { listen: vec![listen.clone()], connect, tls };
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,

@@ -60,6 +60,7 @@ pub struct Declarer {
     pub(crate) tick: Option<Duration>,
     pub(crate) reads: Vec<PathBuf>,
     pub(crate) input_checks: Vec<InputCheck>,
+    pub(crate) warnings: Vec<String>,
 }
 
 /// A check of a component's inputs beyond readability (see
@@ -135,6 +136,14 @@ impl Declarer {
         check: impl Fn() -> Result<(), String> + Send + Sync + 'static,
     ) -> &mut Self {
         self.input_checks.push(InputCheck(Arc::new(check)));
+        self
+    }
+
+    /// Declares a warning about how this component is configured (a
+    /// network link without authentication, say): logged when a run
+    /// starts and listed in the run's `warnings` in metrics.json.
+    pub fn warn(&mut self, message: impl Into<String>) -> &mut Self {
+        self.warnings.push(message.into());
         self
     }
 

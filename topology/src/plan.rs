@@ -130,6 +130,17 @@ impl Topology {
         errors
     }
 
+    /// The warnings the components declared ([`Declarer::warn`]), each
+    /// naming its component.
+    pub fn declared_warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        for c in &self.components {
+            let (role, name) = (c.spec.role, &c.spec.name);
+            warnings.extend(c.declared.warnings.iter().map(|w| format!("{role} \"{name}\": {w}")));
+        }
+        warnings
+    }
+
     /// The topology's name.
     pub fn name(&self) -> &str {
         &self.spec.name

@@ -98,7 +98,53 @@ impl Endpoint {
         }
         Ok(Endpoint { protocol, host: host.to_string(), port })
     }
+
+    /// Whether the host is a loopback address (127.0.0.0/8, `[::1]`,
+    /// `localhost`): reachable from this machine only. Any other name
+    /// may resolve to an address others reach, so it is not.
+    pub fn is_loopback(&self) -> bool {
+        let host = self.host.trim_start_matches('[').trim_end_matches(']');
+        host.eq_ignore_ascii_case("localhost")
+            || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+    }
+
+    /// Whether the endpoint is plain `tcp/` beyond loopback: whoever can
+    /// reach it talks to this process, or reads and alters what it says,
+    /// without proving who they are.
+    pub fn is_exposed(&self) -> bool {
+        self.protocol == Protocol::Tcp && !self.is_loopback()
+    }
 }
+
+/// The first endpoint that is plain `tcp/` beyond loopback.
+pub fn exposed_endpoint<'a>(endpoints: impl IntoIterator<Item = &'a Endpoint>) -> Option<&'a Endpoint> {
+    endpoints.into_iter().find(|e| e.is_exposed())
+}
+
+/// Why `endpoint` (plain `tcp/` beyond loopback) is refused, what a peer
+/// could do there (`risk`), and the two ways out: mutual TLS, or the
+/// explicit opt-in `opt_in` (`--insecure`, `insecure = true`).
+pub fn exposure_refusal(endpoint: &Endpoint, risk: &str, opt_in: &str) -> String {
+    format!(
+        "{endpoint}: plain tcp/ beyond loopback, with no authentication: anyone who can reach it could \
+         {risk}. Use mutual TLS (tls/ endpoints and a certificate for each process, made as \
+         docs/guide/security.md shows), or, on a network you trust, {opt_in}"
+    )
+}
+
+/// The warning an insecure opt-in prints at start and leaves in the
+/// run's metrics.
+pub fn exposure_warning(endpoint: &Endpoint, risk: &str) -> String {
+    format!(
+        "insecure: {endpoint} is plain tcp/ beyond loopback, without authentication: anyone who can \
+         reach it could {risk}"
+    )
+}
+
+/// What a peer could do at a worker's port.
+pub const WORKER_RISK: &str = "make this worker run plans: read the files it may read and send them on";
+/// What a peer could do on a live link.
+pub const LIVE_LINK_RISK: &str = "read the robot's scans and poses, or send it false ones";
 
 impl std::fmt::Display for Endpoint {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -189,6 +235,21 @@ pub struct ClusterSpec {
     pub placement: BTreeMap<String, Vec<Host>>,
     /// Mutual TLS, if configured.
     pub tls: Option<TlsSpec>,
+    /// `insecure = true` under `[cluster]`: plain `tcp/` endpoints beyond
+    /// loopback are allowed (a network the user trusts).
+    pub insecure: bool,
+}
+
+impl ClusterSpec {
+    /// The warnings of a run on this cluster: one per worker reached over
+    /// plain `tcp/` beyond loopback (allowed by `insecure = true`).
+    pub fn exposure_warnings(&self) -> Vec<String> {
+        self.workers
+            .iter()
+            .filter(|w| w.endpoint.is_exposed())
+            .map(|w| format!("worker {:?}: {}", w.name, exposure_warning(&w.endpoint, WORKER_RISK)))
+            .collect()
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -206,6 +267,8 @@ struct RawCluster {
 #[serde(deny_unknown_fields)]
 struct RawHeader {
     name: Spanned<String>,
+    #[serde(default)]
+    insecure: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -350,13 +413,21 @@ impl Checker<'_> {
     }
 
     /// With TLS every endpoint is `tls/`; without, every one is `tcp/`.
-    fn endpoint_protocols(&mut self, workers: &[WorkerSpec], tls: bool) {
+    fn endpoint_protocols(&mut self, workers: &[WorkerSpec], tls: bool, insecure: bool) {
         for w in workers {
-            if mismatched_endpoint([&w.endpoint], tls).is_some() {
-                let why = if tls { "with [tls], endpoints are tls/" } else { "tls/ needs a [tls] section" };
-                let error = self.error(w.line, format!("worker {:?}: {why}", w.name));
-                self.errors.push(error);
-            }
+            let why = if mismatched_endpoint([&w.endpoint], tls).is_some() {
+                if tls {
+                    "with [tls], endpoints are tls/".to_string()
+                } else {
+                    "tls/ needs a [tls] section".into()
+                }
+            } else if w.endpoint.is_exposed() && !insecure {
+                exposure_refusal(&w.endpoint, WORKER_RISK, "set `insecure = true` under [cluster]")
+            } else {
+                continue;
+            };
+            let error = self.error(w.line, format!("worker {:?}: {why}", w.name));
+            self.errors.push(error);
         }
     }
 }
@@ -384,15 +455,16 @@ impl ClusterSpec {
             SpecErrors(vec![check.error(line, e.message().trim().to_string())])
         })?;
         let name = raw.cluster.get_ref().name.clone();
+        let insecure = raw.cluster.get_ref().insecure;
         check.cluster_name(&name);
         let (workers, declared) = check.workers(&raw.worker);
         let placement = check.placement(&raw.placement, &declared);
         let tls = raw.tls.as_ref().map(|t| check.tls(t.get_ref(), folder));
-        check.endpoint_protocols(&workers, tls.is_some());
+        check.endpoint_protocols(&workers, tls.is_some(), insecure);
         if !check.errors.is_empty() {
             return Err(SpecErrors(check.errors));
         }
-        Ok(ClusterSpec { file: file.to_string(), name: name.into_inner(), workers, placement, tls })
+        Ok(ClusterSpec { file: file.to_string(), name: name.into_inner(), workers, placement, tls, insecure })
     }
 
     /// The host of each of `tasks` tasks of `component`: the explicit
@@ -503,5 +575,40 @@ mod tests {
         let m = ClusterSpec::parse("c.toml", &missing, &folder).unwrap_err().to_string();
         assert!(m.contains("no such file") && m.contains("gone.key"), "{m}");
         std::fs::remove_dir_all(&folder).unwrap();
+    }
+
+    #[test]
+    fn loopback_is_told_apart_from_every_other_host() {
+        for host in ["127.0.0.1", "127.8.9.10", "[::1]", "localhost", "LOCALHOST"] {
+            let e = Endpoint::parse(&format!("tcp/{host}:7447")).unwrap();
+            assert!(e.is_loopback() && !e.is_exposed(), "{host}");
+        }
+        for host in ["0.0.0.0", "192.168.1.10", "[::]", "[fe80::1]", "robot.lan", "localhost.evil.com"] {
+            let e = Endpoint::parse(&format!("tcp/{host}:7447")).unwrap();
+            assert!(!e.is_loopback() && e.is_exposed(), "{host}");
+            let tls = Endpoint::parse(&format!("tls/{host}:7447")).unwrap();
+            assert!(!tls.is_exposed(), "tls/{host} is authenticated");
+        }
+    }
+
+    #[test]
+    fn a_plain_worker_beyond_loopback_needs_insecure_and_is_then_warned_about() {
+        let lan = TWO.replace("tcp/127.0.0.1:7447", "tcp/192.168.1.10:7447");
+        let m = messages(&lan);
+        assert_eq!(m.len(), 1, "{m:?}");
+        assert!(
+            m[0].starts_with("c.toml:4: worker \"w1\": tcp/192.168.1.10:7447: plain tcp/ beyond loopback"),
+            "{m:?}"
+        );
+        assert!(
+            m[0].contains("docs/guide/security.md") && m[0].contains("`insecure = true` under [cluster]"),
+            "{m:?}"
+        );
+        let allowed = parse(&lan.replace("name = \"lab\"", "name = \"lab\"\ninsecure = true")).unwrap();
+        assert!(allowed.insecure);
+        let warnings = allowed.exposure_warnings();
+        assert_eq!(warnings.len(), 1, "only w1 is beyond loopback: {warnings:?}");
+        assert!(warnings[0].starts_with("worker \"w1\": insecure: tcp/192.168.1.10:7447"), "{warnings:?}");
+        assert!(parse(TWO).unwrap().exposure_warnings().is_empty());
     }
 }

@@ -16,6 +16,9 @@ use crate::runtime::{RunError, RunOptions};
 /// Runs `topology` in this process until its spouts are exhausted and every
 /// tuple is processed.
 pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunError> {
+    for warning in topology.declared_warnings() {
+        tracing::warn!("{warning}");
+    }
     let runtime = io_runtime()?;
     let mut wiring = Wiring::build(topology, options, &|_| None);
     let started = Instant::now();

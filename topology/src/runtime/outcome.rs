@@ -103,7 +103,7 @@ pub(crate) fn build_report_with_unsent(
     for &(consumer, n) in unsent {
         components[consumer].undelivered += n;
     }
-    let mut warnings = Vec::new();
+    let mut warnings = topology.declared_warnings();
     for c in &components {
         if c.undelivered > 0 {
             warnings.push(format!(

@@ -80,6 +80,9 @@ pub fn run_on_cluster(
         .enable_all()
         .build()
         .map_err(|e| setup(format!("cannot start the runtime: {e}")))?;
+    for warning in cluster.exposure_warnings().into_iter().chain(topology.declared_warnings()) {
+        tracing::warn!("{warning}");
+    }
     let connect = cluster.workers.iter().map(|w| w.endpoint.clone()).collect();
     let session_options = SessionOptions { listen: Vec::new(), connect, tls: cluster.tls.clone() };
     let session = io.block_on(session::open(&session_options)).map_err(setup)?;
@@ -155,7 +158,9 @@ fn coordinate(
         workers: (1..host_count as u16).collect(),
         lost: Vec::new(),
         started,
-        warnings: Vec::new(),
+        // A cluster reached without authentication says so in the run's
+        // metrics, as it did at the start.
+        warnings: cluster.exposure_warnings(),
         stash: Vec::new(),
         next_nonce: 1,
     };

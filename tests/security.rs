@@ -1,0 +1,177 @@
+//! Secure by default: no process listens on or connects to a plain `tcp/`
+//! endpoint beyond loopback unless told that the network is trusted
+//! (`--insecure`, `insecure = true`), and then it says so at start and in
+//! the run's metrics. Refusals come before anything listens or runs.
+//!
+//! Only loopback and a private network namespace are used: the tests that
+//! need an address beyond loopback make one on the loopback device of a
+//! namespace of their own (`unshare -rn`), which nothing outside reaches.
+#![cfg(feature = "cluster")]
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::Duration;
+
+use common::{free_port, output_within};
+
+/// How long a command may take before the test fails as hung.
+const HUNG: Duration = Duration::from_secs(120);
+
+fn squall(args: &[&str]) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_squall"));
+    command.current_dir(env!("CARGO_MANIFEST_DIR")).args(args);
+    output_within(&mut command, HUNG, String::new)
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Asserts that `out` is a refusal before the run (exit 2) of `endpoint`
+/// that says how to set up mutual TLS and which opt-in exists.
+fn assert_refused(out: &Output, endpoint: &str, opt_in: &str) {
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{endpoint}: plain tcp/ beyond loopback, with no authentication")),
+        "{stderr}"
+    );
+    assert!(stderr.contains("Use mutual TLS") && stderr.contains("docs/guide/security.md"), "{stderr}");
+    assert!(stderr.contains(opt_in), "{stderr}");
+}
+
+#[test]
+fn a_worker_refuses_to_listen_beyond_loopback_without_tls() {
+    let port = free_port();
+    for host in ["0.0.0.0", "192.0.2.7", "[::]"] {
+        let endpoint = format!("tcp/{host}:{port}");
+        let out = squall(&["worker", "--listen", &endpoint]);
+        assert_refused(&out, &endpoint, "pass --insecure");
+        assert!(!text(&out.stderr).contains("listening on"), "{}", text(&out.stderr));
+    }
+    // Nor does it connect to a plain peer beyond loopback.
+    let out =
+        squall(&["worker", "--listen", &format!("tcp/127.0.0.1:{port}"), "--connect", "tcp/192.0.2.7:7447"]);
+    assert_refused(&out, "tcp/192.0.2.7:7447", "pass --insecure");
+}
+
+#[test]
+fn a_coordinator_refuses_a_plain_worker_beyond_loopback_naming_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("lab.toml");
+    let text_of = |insecure: &str| {
+        format!(
+            "[cluster]\nname = \"lab\"\n{insecure}\n[[worker]]\nname = \"big\"\nendpoint = \"tcp/192.0.2.7:7601\"\n"
+        )
+    };
+    std::fs::write(&file, text_of("")).unwrap();
+    let run = |file: &Path| {
+        squall(&["run", "examples/topologies/probe.toml", "--quiet", "--cluster", file.to_str().unwrap()])
+    };
+    let out = run(&file);
+    assert_refused(&out, "tcp/192.0.2.7:7601", "set `insecure = true` under [cluster]");
+    assert!(text(&out.stderr).contains("lab.toml:4: worker \"big\""), "{}", text(&out.stderr));
+}
+
+#[test]
+fn a_live_link_refuses_a_plain_endpoint_beyond_loopback_and_a_robot_too() {
+    let endpoint = format!("tcp/0.0.0.0:{}", free_port());
+    let out = squall(&[
+        "run",
+        "examples/topologies/live_slam.toml",
+        "--set",
+        &format!("source.params.listen=[\"{endpoint}\"]"),
+    ]);
+    assert_refused(&out, &endpoint, "set `insecure = true`");
+    assert!(text(&out.stderr).contains("spout \"source\""), "{}", text(&out.stderr));
+    let log = common::shared_data("laser/aces.clf");
+    let out = squall(&["robot", "--log", &log, "--connect", "tcp/192.0.2.7:7447"]);
+    assert_refused(&out, "tcp/192.0.2.7:7447", "pass --insecure");
+}
+
+/// Runs `script` with `sh` in a network namespace of its own whose
+/// loopback device also carries 10.9.9.9, an address beyond loopback that
+/// only this namespace has. Fails the test if such a namespace cannot be
+/// made here.
+fn in_private_network(script: &str) -> Output {
+    let setup = "ip link set lo up && ip addr add 10.9.9.9/32 dev lo";
+    let mut command = Command::new("unshare");
+    command
+        .args(["-rn", "sh", "-c", &format!("{setup} && {script}")])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("SQUALL", env!("CARGO_BIN_EXE_squall"));
+    output_within(&mut command, HUNG, String::new)
+}
+
+#[test]
+fn with_insecure_a_robot_and_its_live_link_talk_beyond_loopback_and_warn_at_start_and_in_the_metrics() {
+    let out_dir = tempfile::tempdir().unwrap();
+    let endpoint = "tcp/10.9.9.9:7447";
+    let log = common::shared_data("laser/aces.clf");
+    let script = format!(
+        "\"$SQUALL\" run examples/topologies/live_slam.toml --quiet --out {out} \
+           --set 'source.params.listen=[\"{endpoint}\"]' --set source.params.insecure=true \
+           --set 'publish.params.listen=[\"{endpoint}\"]' --set publish.params.insecure=true \
+           --set source.params.idle_secs=2.0 2> {out}/run.err & \
+         \"$SQUALL\" robot --log {log} --connect {endpoint} --insecure --max-scans 20 --speed 5 --wait-secs 2; \
+         robot=$?; wait $!; echo \"run=$? robot=$robot\"",
+        out = out_dir.path().display(),
+    );
+    let done = in_private_network(&script);
+    let (stdout, stderr) = (text(&done.stdout), text(&done.stderr));
+    assert!(stdout.contains("run=0 robot=0"), "{stdout}\n{stderr}");
+    let run_log = std::fs::read_to_string(out_dir.path().join("run.err")).unwrap();
+    // The robot warned at start, and so did the run, once per component.
+    assert!(
+        stderr.contains(&format!("squall robot: WARNING: insecure: {endpoint} is plain tcp/")),
+        "{stderr}"
+    );
+    for component in ["spout \"source\"", "bolt \"publish\""] {
+        assert!(run_log.contains(&format!("{component}: insecure: {endpoint}")), "{run_log}");
+    }
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.path().join("metrics.json")).unwrap()).unwrap();
+    let warnings: Vec<&str> =
+        metrics["warnings"].as_array().unwrap().iter().filter_map(|w| w.as_str()).collect();
+    let insecure: Vec<&&str> = warnings.iter().filter(|w| w.contains("insecure:")).collect();
+    assert_eq!(insecure.len(), 2, "{warnings:?}");
+    assert!(stdout.contains("poses received:"), "the robot got poses back: {stdout}");
+}
+
+#[test]
+fn with_insecure_a_worker_and_its_coordinator_talk_beyond_loopback_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = dir.path().join("lab.toml");
+    let file = "[cluster]\nname = \"lab\"\ninsecure = true\n\n[[worker]]\nname = \"big\"\n\
+                endpoint = \"tcp/10.9.9.9:7601\"\n\n[placement]\nrelay = [\"big\"]\n";
+    std::fs::write(&cluster, file).unwrap();
+    // A worker outlives the runs it hosts: it is killed once the run is
+    // over.
+    let script = format!(
+        "\"$SQUALL\" worker --listen tcp/10.9.9.9:7601 --insecure 2> {log} & \
+         for i in $(seq 600); do grep -q 'listening on' {log} && break; sleep 0.1; done; \
+         \"$SQUALL\" run examples/topologies/probe.toml --quiet --set source.params.count=2000 \
+           --cluster {cluster} --out {out}; run=$?; kill $!; wait $!; cat {log} >&2; echo \"run=$run\"",
+        log = dir.path().join("worker.err").display(),
+        cluster = cluster.display(),
+        out = dir.path().display(),
+    );
+    let done = in_private_network(&script);
+    let (stdout, stderr) = (text(&done.stdout), text(&done.stderr));
+    assert!(stdout.contains("run=0"), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("squall worker: WARNING: insecure: tcp/10.9.9.9:7601 is plain tcp/ beyond loopback"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("listening on tcp/10.9.9.9:7601"), "{stderr}");
+    // The coordinator warned at start and in the run's metrics.
+    assert!(stderr.contains("worker \"big\": insecure: tcp/10.9.9.9:7601"), "{stderr}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()).unwrap();
+    let warnings = metrics["warnings"].to_string();
+    assert!(warnings.contains("worker \\\"big\\\": insecure: tcp/10.9.9.9:7601"), "{warnings}");
+    let relay = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "relay").unwrap();
+    assert_eq!(relay["received"], 2000, "the relay on the worker got every probe");
+}
