@@ -175,3 +175,117 @@ fn with_insecure_a_worker_and_its_coordinator_talk_beyond_loopback_and_say_so() 
     let relay = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "relay").unwrap();
     assert_eq!(relay["received"], 2000, "the relay on the worker got every probe");
 }
+
+/// A topology whose carmen source reads `log` into a counting sink, and a
+/// cluster file placing the source on the one worker at `endpoint`.
+fn carmen_on_worker(dir: &Path, log: &Path, endpoint: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let topology = dir.join("read.toml");
+    let text = format!(
+        "[topology]\nname = \"read\"\n\n[[spout]]\nname = \"source\"\nkind = \"carmen\"\n\
+         params = {{ log = {:?} }}\n\n[[bolt]]\nname = \"count\"\nkind = \"sink.count\"\n\
+         inputs = [ {{ from = \"source\", stream = \"scan\" }} ]\n",
+        log.display().to_string()
+    );
+    std::fs::write(&topology, text).unwrap();
+    let cluster = dir.join("lab.toml");
+    let file = format!(
+        "[cluster]\nname = \"lab\"\n\n[[worker]]\nname = \"w1\"\nendpoint = \"{endpoint}\"\n\n\
+         [placement]\nsource = [\"w1\"]\n"
+    );
+    std::fs::write(&cluster, file).unwrap();
+    (topology, cluster)
+}
+
+/// `squall worker` on a free loopback port with `args`, its stderr in
+/// `log`; killed on drop.
+struct Worker(std::process::Child, String);
+
+impl Worker {
+    fn start(args: &[&str], log: &Path) -> Worker {
+        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        let child = Command::new(env!("CARGO_BIN_EXE_squall"))
+            .args(["worker", "--listen", &endpoint])
+            .args(args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(log).unwrap())
+            .spawn()
+            .unwrap();
+        Worker(child, endpoint)
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn a_plan_reading_outside_the_data_dir_is_refused_and_nothing_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    // The file the plan names: a FIFO outside --data-dir. Opening it for
+    // writing blocks until somebody opens it for reading, so the writer
+    // below returns only if the worker ever opens it.
+    let fifo = dir.path().join("system-file");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    let (opened, was_opened) = std::sync::mpsc::channel();
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || {
+            let _file = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
+            let _ = opened.send(());
+        })
+    };
+    let worker = Worker::start(&["--data-dir", data.to_str().unwrap()], &dir.path().join("w1.log"));
+    let (topology, cluster) = carmen_on_worker(dir.path(), &fifo, &worker.1);
+    let out = squall(&["run", topology.to_str().unwrap(), "--quiet", "--cluster", cluster.to_str().unwrap()]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("worker \"w1\" refused the run"), "{stderr}");
+    assert!(stderr.contains(&format!("{}: outside this worker's --data-dir", fifo.display())), "{stderr}");
+    assert!(stderr.contains("spout \"source\""), "the refusal names the component: {stderr}");
+    // The worker never opened the file: the writer is still waiting.
+    assert!(was_opened.try_recv().is_err(), "the worker opened the file outside its --data-dir");
+    // Opening it here lets the writer go (a writer is waiting, so this
+    // open does not block).
+    let _reader = std::fs::File::open(&fifo).unwrap();
+    writer.join().unwrap();
+    assert!(was_opened.try_recv().is_ok());
+    // The worker is still up and says why it refused.
+    let log = std::fs::read_to_string(dir.path().join("w1.log")).unwrap();
+    assert!(log.contains("outside this worker's --data-dir"), "{log}");
+    drop(worker);
+}
+
+#[test]
+fn a_plan_reading_under_the_data_dir_runs_on_the_worker() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    // The first 400 lines of the ACES log, under --data-dir.
+    let aces = std::fs::read_to_string(common::shared_data("laser/aces.clf")).unwrap();
+    let log = data.join("aces-head.clf");
+    std::fs::write(&log, aces.lines().take(400).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    let worker = Worker::start(&["--data-dir", data.to_str().unwrap()], &dir.path().join("w1.log"));
+    let (topology, cluster) = carmen_on_worker(dir.path(), &log, &worker.1);
+    let out_dir = dir.path().join("out");
+    let out = squall(&[
+        "run",
+        topology.to_str().unwrap(),
+        "--quiet",
+        "--cluster",
+        cluster.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap()).unwrap();
+    let count = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "count").unwrap();
+    assert!(count["received"].as_u64().unwrap() > 0, "{count}");
+    drop(worker);
+}

@@ -54,6 +54,10 @@ pub enum Error {
     /// A line-map file that does not read or parse.
     #[error(transparent)]
     MapFile(#[from] squall_core::textfile::TextFileError),
+    /// This process may not touch the file (a worker's `--data-dir` and
+    /// `--out`).
+    #[error(transparent)]
+    Confined(#[from] squall_topology::confine::ConfinementError),
     /// A map's inside could not be found (see `squall_core::interior`).
     #[error(transparent)]
     Core(#[from] squall_core::Error),

@@ -134,6 +134,9 @@ impl DepthSimSpout {
 impl Spout for DepthSimSpout {
     fn declare(&self, d: &mut Declarer) {
         d.output::<DepthFrame>("frame").output::<PoseStamped>("truth");
+        if let Some(file) = crate::sim::world_file(&self.p.world) {
+            d.reads(file);
+        }
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {

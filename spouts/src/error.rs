@@ -30,6 +30,9 @@ pub enum Error {
     /// A CDR message does not decode (without the bag; see [`Error::Bag`]).
     #[error(transparent)]
     Cdr(#[from] CdrError),
+    /// This process may not read the file (a worker's `--data-dir`).
+    #[error(transparent)]
+    Confined(#[from] squall_topology::confine::ConfinementError),
     /// A line-map file could not be read or holds a malformed line.
     #[error(transparent)]
     LineMap(#[from] TextFileError),

@@ -11,6 +11,7 @@ use squall_topology::cluster::config::{
 };
 use squall_topology::cluster::run::host_run;
 use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, reply_key, worker_key};
+use squall_topology::confine::{self, Confinement};
 
 use super::tls::TlsArgs;
 use super::{EXIT_FAILED, EXIT_INVALID};
@@ -23,9 +24,14 @@ pub(super) struct WorkerArgs {
     /// Other processes to connect to (repeatable).
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
-    /// Where tasks placed here write their outputs.
+    /// Where tasks placed here write their outputs: the only folder a
+    /// plan may write under (none without it).
     #[arg(long, value_name = "DIR")]
     out: Option<std::path::PathBuf>,
+    /// The only folder a plan's components may read under (logs, bags,
+    /// maps); without it, plans read no files.
+    #[arg(long, value_name = "DIR")]
+    data_dir: Option<std::path::PathBuf>,
     #[command(flatten)]
     tls: TlsArgs,
     /// Allow plain tcp/ endpoints beyond loopback, without mutual TLS: on
@@ -60,6 +66,26 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             eprintln!("squall worker: WARNING: {warning} (--insecure)");
         }
     }
+    if let Some(out) = &args.out
+        && let Err(e) = std::fs::create_dir_all(out)
+    {
+        eprintln!("squall worker: --out {}: {e}", out.display());
+        return ExitCode::from(EXIT_INVALID);
+    }
+    // From here on this process reads and writes only where it was told.
+    let policy = Confinement::new(args.data_dir.as_deref(), args.out.as_deref()).and_then(confine::confine);
+    if let Err(e) = policy {
+        eprintln!("squall worker: {e}");
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let folder = |dir: &Option<std::path::PathBuf>, none: &str| {
+        dir.as_ref().map_or(none.to_string(), |d| format!("under {}", d.display()))
+    };
+    eprintln!(
+        "squall worker: plans read {} and write {}",
+        folder(&args.data_dir, "no files (no --data-dir)"),
+        folder(&args.out, "no files (no --out)")
+    );
     let options = SessionOptions { listen: vec![listen.clone()], connect, tls };
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,

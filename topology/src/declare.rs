@@ -59,6 +59,7 @@ pub struct Declarer {
     pub(crate) peer: Option<MessageType>,
     pub(crate) tick: Option<Duration>,
     pub(crate) reads: Vec<PathBuf>,
+    pub(crate) writes: Vec<PathBuf>,
     pub(crate) input_checks: Vec<InputCheck>,
     pub(crate) warnings: Vec<String>,
 }
@@ -123,6 +124,15 @@ impl Declarer {
     /// invalid input, reported with the rest, not a run that fails later.
     pub fn reads(&mut self, path: impl Into<PathBuf>) -> &mut Self {
         self.reads.push(path.into());
+        self
+    }
+
+    /// Declares a file or folder this component writes outside the run's
+    /// output folder (a cache). A confined worker refuses a plan whose
+    /// components write outside its `--out` before any task starts
+    /// ([`crate::confine`]).
+    pub fn writes(&mut self, path: impl Into<PathBuf>) -> &mut Self {
+        self.writes.push(path.into());
         self
     }
 

@@ -17,6 +17,7 @@
 
 pub mod cluster;
 mod component;
+pub mod confine;
 mod context;
 mod declare;
 mod error;

@@ -130,6 +130,27 @@ impl Topology {
         errors
     }
 
+    /// The paths the components of `hosted` (by index) declared they read
+    /// or write ([`Declarer::reads`], [`Declarer::writes`]) that
+    /// `policy` does not allow, each an error at its component's params:
+    /// what a confined worker checks before any task starts.
+    pub fn confinement_errors(
+        &self,
+        policy: &crate::confine::Confinement,
+        hosted: impl Fn(usize) -> bool,
+    ) -> Vec<SpecError> {
+        let mut errors = Vec::new();
+        for (_, c) in self.components.iter().enumerate().filter(|(i, _)| hosted(*i)) {
+            let at = Some((c.spec.role, c.spec.name.as_str()));
+            let refusals = c.declared.reads.iter().map(|p| policy.check_read(p));
+            let refusals = refusals.chain(c.declared.writes.iter().map(|p| policy.check_write(p)));
+            for refused in refusals.filter_map(Result::err) {
+                errors.push(self.spec.source.error_at_line(c.spec.params_line, at, refused.to_string()));
+            }
+        }
+        errors
+    }
+
     /// The warnings the components declared ([`Declarer::warn`]), each
     /// naming its component.
     pub fn declared_warnings(&self) -> Vec<String> {

@@ -148,12 +148,12 @@ impl Default for CgrParams {
 }
 
 /// Scene grids built in this process, by cache key: every matcher task
-/// shares one.
+/// shares one. With a `dir`, the grid is also cached there on disk.
 fn shared_grid(
     map: &LineMap,
     cell: Real,
     range: Real,
-    dir: &std::path::Path,
+    dir: Option<&std::path::Path>,
 ) -> crate::Result<Arc<SceneGrid>> {
     static GRIDS: OnceLock<Mutex<HashMap<u64, Arc<SceneGrid>>>> = OnceLock::new();
     let grids = GRIDS.get_or_init(Default::default);
@@ -163,10 +163,16 @@ fn shared_grid(
         return Ok(g.clone());
     }
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let (grid, built) = SceneGrid::load_or_build(map, cell, range, threads, dir)?;
-    if built {
-        tracing::info!("observable scenes precomputed and cached in {}", dir.display());
-    }
+    let grid = match dir {
+        Some(dir) => {
+            let (grid, built) = SceneGrid::load_or_build(map, cell, range, threads, dir)?;
+            if built {
+                tracing::info!("observable scenes precomputed and cached in {}", dir.display());
+            }
+            grid
+        }
+        None => SceneGrid::build(map, cell, range, threads)?,
+    };
     let grid = Arc::new(grid);
     grids.insert(key, grid.clone());
     Ok(grid)
@@ -202,12 +208,22 @@ pub(crate) fn cgr_model(table: toml::Table) -> crate::Result<CgrModel> {
     };
     cgr.check()?;
     crate::error::positive("cell", p.cell)?;
+    squall_topology::confine::check_read(&p.map)?;
     let map = Arc::new(LineMap::load(&p.map)?);
     let scenes = match p.scenes.as_str() {
         "on_demand" => None,
         "grid" => {
-            let dir = p.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("squall-scenes"));
-            Some(shared_grid(&map, p.cell, p.range, &dir)?)
+            // A confined worker writes only where it was told: the cache
+            // goes where `cache_dir` says (under its --out), or nowhere.
+            let dir = match (&p.cache_dir, squall_topology::confine::policy()) {
+                (Some(dir), _) => {
+                    squall_topology::confine::check_write(dir)?;
+                    Some(dir.clone())
+                }
+                (None, Some(_)) => None,
+                (None, None) => Some(std::env::temp_dir().join("squall-scenes")),
+            };
+            Some(shared_grid(&map, p.cell, p.range, dir.as_deref())?)
         }
         other => {
             return Err(Error::Setting(format!("scenes must be \"grid\" or \"on_demand\", got \"{other}\"")));

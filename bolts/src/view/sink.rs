@@ -243,6 +243,8 @@ impl FoxgloveSink {
         let line_map = match &params.line_map {
             None => None,
             Some(path) => {
+                squall_topology::confine::check_read(std::path::Path::new(path))
+                    .map_err(|e| ParamError::new(format!("line_map: {e}")))?;
                 let text = std::fs::read_to_string(path)
                     .map_err(|e| ParamError::new(format!("line_map {path}: {e}")))?;
                 Some(LineMap::parse(path, &text).map_err(|e| ParamError::new(e.to_string()))?)

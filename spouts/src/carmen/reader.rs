@@ -14,6 +14,9 @@ use super::parse::{Laser, LineParser, Record, RecordError};
 /// A problem reading a log, with file and line.
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
+    /// This process may not read the file (a worker's `--data-dir`).
+    #[error(transparent)]
+    Confined(#[from] squall_topology::confine::ConfinementError),
     /// The file could not be opened.
     #[error("{path}: cannot open: {source}")]
     Open {
@@ -65,6 +68,7 @@ impl Default for ReadOptions {
 /// The log's bytes, plain or gunzipped (gzip is recognised by its magic
 /// bytes, not the name).
 fn open_input(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
+    squall_topology::confine::check_read(path)?;
     let open_err = |source| LogError::Open { path: path.to_path_buf(), source };
     let mut file = BufReader::with_capacity(1 << 16, File::open(path).map_err(open_err)?);
     let gzip = file.fill_buf().map_err(open_err)?.starts_with(&[0x1f, 0x8b]);

@@ -46,6 +46,9 @@ impl Default for Topics {
 /// A problem reading a bag.
 #[derive(Debug, thiserror::Error)]
 pub enum BagError {
+    /// This process may not read the bag (a worker's `--data-dir`).
+    #[error(transparent)]
+    Confined(#[from] squall_topology::confine::ConfinementError),
     /// The bag or a file in it could not be read.
     #[error("{path}: cannot read: {source}")]
     Io {
@@ -210,6 +213,17 @@ fn metadata(text: &str) -> (Option<String>, Vec<String>) {
 /// the `.mcap` or `.db3` files in it). ROS 1 bags and other storages are
 /// errors that say how to convert them.
 pub fn bag_files(path: &Path) -> Result<(Storage, Vec<PathBuf>), BagError> {
+    // A confined process (a worker) reads the bag, and every file its
+    // metadata or its folder names, only under its data folder.
+    squall_topology::confine::check_read(path)?;
+    let (storage, files) = find_bag_files(path)?;
+    for file in &files {
+        squall_topology::confine::check_read(file)?;
+    }
+    Ok((storage, files))
+}
+
+fn find_bag_files(path: &Path) -> Result<(Storage, Vec<PathBuf>), BagError> {
     let io = |source| BagError::Io { path: path.to_path_buf(), source };
     if path.is_file() {
         return Ok((sniff(path)?, vec![path.to_path_buf()]));
@@ -225,6 +239,7 @@ pub fn bag_files(path: &Path) -> Result<(Storage, Vec<PathBuf>), BagError> {
     };
     let yaml = path.join("metadata.yaml");
     if yaml.is_file() {
+        squall_topology::confine::check_read(&yaml)?;
         let text =
             std::fs::read_to_string(&yaml).map_err(|source| BagError::Io { path: yaml.clone(), source })?;
         let (storage, files) = metadata(&text);

@@ -38,6 +38,12 @@ pub fn top_speed_for(world: &str) -> f64 {
     if world == CAMPUS_WORLD { campus::CAMPUS_SPEED } else { SimConfig::default().max_speed }
 }
 
+/// The line-map file a world name names (`None` for the generated
+/// worlds, `office` and `campus`): what a simulation reads.
+pub fn world_file(world: &str) -> Option<&std::path::Path> {
+    (world != "office" && world != CAMPUS_WORLD).then(|| std::path::Path::new(world))
+}
+
 /// The floor for a world name: `office` or `campus` (generated from
 /// `seed`) or the path of a line-map file (with a roadmap through it).
 pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor> {
@@ -47,7 +53,9 @@ pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor> {
     if world == CAMPUS_WORLD {
         return campus::campus(seed).map_err(|source| Error::Roadmap { world: world.to_string(), source });
     }
-    let walls = squall_core::linemap::LineMap::load(std::path::Path::new(world))?;
+    let file = std::path::Path::new(world);
+    squall_topology::confine::check_read(file)?;
+    let walls = squall_core::linemap::LineMap::load(file)?;
     roadmap::roadmap(walls, ROADMAP_SPACING, ROADMAP_MARGIN)
         .map_err(|source| Error::Roadmap { world: world.to_string(), source })
 }

@@ -103,6 +103,9 @@ impl SimSpout {
 impl Spout for SimSpout {
     fn declare(&self, d: &mut Declarer) {
         d.output::<LaserReading>("scan").output::<Odometry>("odom").output::<PoseStamped>("truth");
+        if let Some(file) = super::world_file(&self.world) {
+            d.reads(file);
+        }
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {

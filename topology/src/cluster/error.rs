@@ -45,6 +45,10 @@ pub enum HostError {
     /// The shipped topology does not validate in this process.
     #[error("the topology does not validate here: {0}")]
     Invalid(SpecErrors),
+    /// The plan names files this worker may not touch (its `--data-dir`
+    /// and `--out`); nothing was read or started.
+    #[error("the plan touches files outside this worker's folders: {0}")]
+    Confined(SpecErrors),
     /// The coordinator never said go.
     #[error("no Go from the coordinator")]
     NoGo,

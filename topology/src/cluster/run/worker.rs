@@ -18,6 +18,7 @@ use crate::plan::Topology;
 use crate::registry::Registry;
 use crate::runtime::RunOptions;
 use crate::runtime::control::{Event, EventKind, Stage};
+use crate::spec::SpecErrors;
 use crate::spec::TopologySpec;
 
 /// How long a worker waits for `Go` after saying it is ready.
@@ -110,6 +111,17 @@ fn prepare(
         .and_then(|spec| Topology::validate(spec, registry))
         .map_err(HostError::Invalid)?;
     let layout = Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(plan.host_count))?);
+    if let Some(policy) = crate::confine::policy() {
+        // Before any task starts (and opens what it declared): every
+        // path a component hosted here reads or writes is inside the
+        // worker's folders. (What components read while they validate
+        // was checked as they read it.)
+        let hosted = |c: usize| (0..layout.tasks(c)).any(|t| layout.host(c, t) == plan.host);
+        let errors = topology.confinement_errors(policy, hosted);
+        if !errors.is_empty() {
+            return Err(HostError::Confined(SpecErrors(errors)));
+        }
+    }
     let subscriber = session
         .declare_subscriber(plan.control_key())
         .wait()
