@@ -402,8 +402,8 @@ fn losing_a_spout_s_worker_fails_the_run_naming_the_spout() {
 fn a_source_failing_with_tuples_held_for_another_process_counts_them_undelivered() {
     // The source (here) fails at its 5000th message: the 135 it emitted
     // in that call wait in its batch for the relay on w1 and are never
-    // sent. They count as undelivered at the relay, so every emit is
-    // still accounted for.
+    // sent. The edge counts them undelivered, so at the sender every emit
+    // is accounted for: sent or unsent.
     let workers = Workers::start(1);
     let cluster = workers.cluster_file("relay = [\"w1\"]");
     let out = tempfile::tempdir().unwrap();
@@ -421,7 +421,11 @@ fn a_source_failing_with_tuples_held_for_another_process_counts_them_undelivered
     let edge = m["edges"].as_array().unwrap().iter().find(|e| e["to"] == "relay").expect("the edge to w1");
     assert_eq!(edge["undelivered"], unsent, "{edge}");
     assert_eq!(edge["messages"].as_u64().unwrap() + unsent, 4999, "{edge}");
+    // At the relay they count as undelivered. (Of the tuples sent, those
+    // still on the wire when the abort closes the worker's queues are
+    // not counted there: the abort races them. So the relay accounts for
+    // at most every emit, and for every unsent one.)
     let lost = count("relay", "dropped") + count("relay", "undelivered");
-    assert_eq!(count("relay", "received") + lost, 4999, "relay: {}", component(&m, "relay"));
+    assert!(count("relay", "received") + lost <= 4999, "relay: {}", component(&m, "relay"));
     assert!(lost >= unsent, "relay: {}", component(&m, "relay"));
 }

@@ -289,3 +289,74 @@ fn a_plan_reading_under_the_data_dir_runs_on_the_worker() {
     assert!(count["received"].as_u64().unwrap() > 0, "{count}");
     drop(worker);
 }
+
+/// A cluster file with the one worker at `endpoint`, placing the probe's
+/// relay tasks as `relay` says.
+fn probe_cluster(dir: &Path, endpoint: &str, relay: &str) -> std::path::PathBuf {
+    let cluster = dir.join("probe-lab.toml");
+    let file = format!(
+        "[cluster]\nname = \"lab\"\n\n[[worker]]\nname = \"w1\"\nendpoint = \"{endpoint}\"\n\n\
+         [placement]\nrelay = {relay}\n"
+    );
+    std::fs::write(&cluster, file).unwrap();
+    cluster
+}
+
+/// `squall run` on the probe topology with `sets` on `cluster`.
+fn probe_run(cluster: &Path, sets: &[&str]) -> Output {
+    let mut args =
+        vec!["run", "examples/topologies/probe.toml", "--quiet", "--cluster", cluster.to_str().unwrap()];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    squall(&args)
+}
+
+#[test]
+fn a_worker_refuses_plans_past_its_task_and_queue_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let worker = Worker::start(&["--max-tasks", "1", "--max-queued", "4096"], &dir.path().join("w1.log"));
+    let two = probe_cluster(dir.path(), &worker.1, "[\"w1\", \"w1\"]");
+    let out = probe_run(&two, &["relay.parallelism=2"]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(
+            "refused the run: the plan places 2 tasks on this worker, past its limit of 1 (--max-tasks)"
+        ),
+        "{stderr}"
+    );
+    // One task, but its queue holds more than the worker allows.
+    let one = probe_cluster(dir.path(), &worker.1, "[\"w1\"]");
+    let out = probe_run(&one, &["relay.inputs.0.queue=8192"]);
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("up to 8192 tuples, past its limit of 4096 (--max-queued)"), "{stderr}");
+    // Within both, the worker runs it.
+    let out = probe_run(&one, &["source.params.count=5000"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    drop(worker);
+}
+
+#[test]
+fn a_run_past_a_worker_s_time_or_memory_limit_fails_naming_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    // 3000 probes at 1 kHz take 3 s; the worker allows 1.
+    let worker = Worker::start(&["--max-run-secs", "1"], &dir.path().join("w1.log"));
+    let cluster = probe_cluster(dir.path(), &worker.1, "[\"w1\"]");
+    let out = probe_run(&cluster, &["source.params.count=3000", "source.params.rate_hz=1000"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("worker limit: the run went past this worker's time limit of 1 s (--max-run-secs)"),
+        "{stderr}"
+    );
+    drop(worker);
+    // Any worker holds more than 1 MiB.
+    let worker = Worker::start(&["--max-memory-mb", "1"], &dir.path().join("w2.log"));
+    let cluster = probe_cluster(dir.path(), &worker.1, "[\"w1\"]");
+    let out = probe_run(&cluster, &["source.params.count=3000", "source.params.rate_hz=1000"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("past its limit of 1 MiB (--max-memory-mb)"), "{stderr}");
+    drop(worker);
+}

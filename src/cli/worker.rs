@@ -9,7 +9,7 @@ use squall_topology::RunOptions;
 use squall_topology::cluster::config::{
     Endpoint, WORKER_RISK, exposed_endpoint, exposure_refusal, exposure_warning,
 };
-use squall_topology::cluster::run::host_run;
+use squall_topology::cluster::run::{WorkerLimits, host_run};
 use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, reply_key, worker_key};
 use squall_topology::confine::{self, Confinement};
 
@@ -32,6 +32,22 @@ pub(super) struct WorkerArgs {
     /// maps); without it, plans read no files.
     #[arg(long, value_name = "DIR")]
     data_dir: Option<std::path::PathBuf>,
+    /// Most tasks one run may place here; a plan with more is refused.
+    #[arg(long, value_name = "N", default_value_t = WorkerLimits::default().max_tasks)]
+    max_tasks: usize,
+    /// Most tuples that may wait in this worker's input queues (the
+    /// bounds of the queues of the tasks it hosts, summed); a plan with
+    /// more is refused.
+    #[arg(long, value_name = "N", default_value_t = WorkerLimits::default().max_queued)]
+    max_queued: usize,
+    /// Longest one run may go on here, seconds; past it the run fails.
+    /// Unbounded by default (a live robot streams for hours).
+    #[arg(long, value_name = "S")]
+    max_run_secs: Option<f64>,
+    /// Most resident memory of this worker, MiB; past it the run fails.
+    /// The default is 90% of the machine's memory.
+    #[arg(long, value_name = "MIB")]
+    max_memory_mb: Option<u64>,
     #[command(flatten)]
     tls: TlsArgs,
     /// Allow plain tcp/ endpoints beyond loopback, without mutual TLS: on
@@ -66,6 +82,13 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             eprintln!("squall worker: WARNING: {warning} (--insecure)");
         }
     }
+    let limits = match worker_limits(args) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("squall worker: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
     if let Some(out) = &args.out
         && let Err(e) = std::fs::create_dir_all(out)
     {
@@ -123,9 +146,10 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             let reply = reply_key(presence.endpoint());
             let release = presence.releaser();
             let options = RunOptions { out_dir: args.out.clone(), ..RunOptions::default() };
+            let limits = limits.clone();
             let hosting = tokio::task::spawn_blocking(move || {
                 let registry = squall::builtin::registry();
-                host_run(&session, &plan, &registry, &reply, &options, &release)
+                host_run(&session, &plan, &registry, &reply, &options, &limits, &release)
             });
             tokio::select! {
                 hosted = hosting => match hosted {
@@ -157,6 +181,24 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
         let _ = presence.session().close().await;
         ExitCode::SUCCESS
     })
+}
+
+/// The worker's limits from its flags; an error says which flag is wrong.
+fn worker_limits(args: &WorkerArgs) -> Result<WorkerLimits, String> {
+    let max_run = match args.max_run_secs {
+        None => None,
+        Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
+        Some(s) => return Err(format!("--max-run-secs {s}: expected a number of seconds > 0")),
+    };
+    let max_memory = match args.max_memory_mb {
+        None => WorkerLimits::default().max_memory,
+        Some(0) => return Err("--max-memory-mb 0: expected a number of MiB > 0".into()),
+        Some(mb) => Some(mb << 20),
+    };
+    if args.max_tasks == 0 {
+        return Err("--max-tasks 0: expected at least 1".into());
+    }
+    Ok(WorkerLimits { max_tasks: args.max_tasks, max_queued: args.max_queued, max_run, max_memory })
 }
 
 fn report_stop(reason: StopReason) {

@@ -49,6 +49,9 @@ pub enum HostError {
     /// and `--out`); nothing was read or started.
     #[error("the plan touches files outside this worker's folders: {0}")]
     Confined(SpecErrors),
+    /// The plan asks more of this worker than its limits allow.
+    #[error("{0}")]
+    Limit(String),
     /// The coordinator never said go.
     #[error("no Go from the coordinator")]
     NoGo,

@@ -41,17 +41,78 @@ fn put(session: &Session, key: &str, control: Control) -> Result<(), HostError> 
     send_control(session, key, control).map_err(|e| HostError::transport("cannot reach the coordinator", e))
 }
 
+/// What one run may take of a worker, whatever its plan asks: the
+/// worker's own bounds (`squall worker --max-tasks`, `--max-queued`,
+/// `--max-run-secs`, `--max-memory-mb`). A plan over the first two is
+/// refused before anything starts; a run past the others fails, naming
+/// the limit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WorkerLimits {
+    /// Tasks of one run on this worker.
+    pub max_tasks: usize,
+    /// Tuples that may wait in this worker's input queues: the bounds of
+    /// every input queue (and peer queue) of the tasks it hosts, summed.
+    pub max_queued: usize,
+    /// Wall time of one run on this worker (`None`: unbounded, for a live
+    /// robot that streams for hours).
+    pub max_run: Option<Duration>,
+    /// Resident memory of the worker process, bytes (`None`: unbounded).
+    pub max_memory: Option<u64>,
+}
+
+impl Default for WorkerLimits {
+    /// 64 tasks, a million queued tuples, no time limit, 90% of the
+    /// machine's memory.
+    fn default() -> Self {
+        WorkerLimits {
+            max_tasks: 64,
+            max_queued: 1 << 20,
+            max_run: None,
+            max_memory: crate::runtime::memory::default_limit(),
+        }
+    }
+}
+
+impl WorkerLimits {
+    /// Why a plan placing these tasks here is refused, if it is.
+    fn refusal(&self, topology: &Topology, layout: &Layout, host: u16) -> Option<String> {
+        let (mut tasks, mut queued) = (0usize, 0usize);
+        for (c, component) in topology.components.iter().enumerate() {
+            let here = (0..layout.tasks(c)).filter(|&t| layout.host(c, t) == host).count();
+            let spec = &component.spec;
+            let peers = if component.declared.peer_type().is_some() { spec.peer_queue } else { 0 };
+            let per_task = spec.inputs.iter().map(|i| i.queue).sum::<usize>() + peers;
+            tasks += here;
+            queued = queued.saturating_add(here.saturating_mul(per_task));
+        }
+        if tasks > self.max_tasks {
+            return Some(format!(
+                "the plan places {tasks} tasks on this worker, past its limit of {} (--max-tasks)",
+                self.max_tasks
+            ));
+        }
+        (queued > self.max_queued).then(|| {
+            format!(
+                "the plan's input queues on this worker hold up to {queued} tuples, past its limit of {} \
+                 (--max-queued)",
+                self.max_queued
+            )
+        })
+    }
+}
+
 /// Hosts `plan` on this worker until the coordinator collects it; answers
 /// on `reply_key`. `release` is told the coordinator once the run is over
 /// for this worker (refused or collected), so its going is not a loss. The
-/// topology is validated against `registry`; a plan that does not fit is
-/// refused with the reason.
+/// topology is validated against `registry`; a plan that does not fit, or
+/// that asks more than `limits` allow, is refused with the reason.
 pub fn host_run(
     session: &Session,
     plan: &RunPlan,
     registry: &Registry,
     reply_key: &str,
     options: &RunOptions,
+    limits: &WorkerLimits,
     release: &dyn Fn(&str),
 ) -> Result<Hosted, HostError> {
     let refuse = |reason: HostError| {
@@ -63,7 +124,7 @@ pub fn host_run(
     // The tasks publish their counters, for the reports of `Control::Live`.
     let live = crate::live::LiveRun::new();
     let options = &RunOptions { live: Some(live.clone()), ..options.clone() };
-    let (topology, control, mut host) = prepare(session, plan, registry, options).map_err(refuse)?;
+    let (topology, control, mut host) = prepare(session, plan, registry, options, limits).map_err(refuse)?;
     put(session, reply_key, Control::Ready { run: plan.run.clone() })?;
     let name = topology.name().to_string();
     if !control.wait_for_go()? {
@@ -93,6 +154,10 @@ pub fn host_run(
         report_key,
         live,
         next_live: Instant::now() + LIVE_PERIOD,
+        limits,
+        started: Instant::now(),
+        next_limit_check: Instant::now(),
+        over_limit: false,
     };
     let aborted = run.follow(&control, &events_tx, &events)?;
     let tasks = run.hand_over(&control, aborted, release)?;
@@ -106,11 +171,15 @@ fn prepare(
     plan: &RunPlan,
     registry: &Registry,
     options: &RunOptions,
+    limits: &WorkerLimits,
 ) -> Result<(Topology, ControlInbox, HostRun), HostError> {
     let topology = TopologySpec::parse(&plan.file, &plan.topology)
         .and_then(|spec| Topology::validate(spec, registry))
         .map_err(HostError::Invalid)?;
     let layout = Arc::new(Layout::new(&topology, plan.hosts.clone(), usize::from(plan.host_count))?);
+    if let Some(refusal) = limits.refusal(&topology, &layout, plan.host) {
+        return Err(HostError::Limit(refusal));
+    }
     if let Some(policy) = crate::confine::policy() {
         // Before any task starts (and opens what it declared): every
         // path a component hosted here reads or writes is inside the
@@ -172,6 +241,10 @@ impl ControlInbox {
     }
 }
 
+/// How often a run is checked against the worker's time and memory
+/// limits.
+const LIMIT_CHECK: Duration = Duration::from_millis(100);
+
 /// A started run on this worker, following the coordinator.
 struct Following<'a> {
     session: &'a Session,
@@ -182,6 +255,11 @@ struct Following<'a> {
     report_key: String,
     live: Arc<crate::live::LiveRun>,
     next_live: Instant,
+    limits: &'a WorkerLimits,
+    started: Instant,
+    next_limit_check: Instant,
+    /// Whether the run went past a limit (and was failed for it).
+    over_limit: bool,
 }
 
 impl Following<'_> {
@@ -210,6 +288,12 @@ impl Following<'_> {
                 self.next_live = Instant::now() + LIVE_PERIOD;
                 put(self.session, &self.report_key, self.live_report())?;
             }
+            if !self.over_limit && Instant::now() >= self.next_limit_check {
+                self.next_limit_check = Instant::now() + LIMIT_CHECK;
+                if let Some(why) = self.past_limit() {
+                    self.fail_for_limit(&why)?;
+                }
+            }
             match control.next(Duration::from_millis(1))? {
                 Some(Control::Advance { component, stage }) => {
                     let Some(stage) = Stage::from_u8(stage) else { continue };
@@ -229,6 +313,47 @@ impl Following<'_> {
                 Some(_) | None => {}
             }
         }
+    }
+
+    /// Which of the worker's limits the run is past, if any.
+    fn past_limit(&self) -> Option<String> {
+        if let Some(max) = self.limits.max_run
+            && self.started.elapsed() > max
+        {
+            return Some(format!(
+                "the run went past this worker's time limit of {} s (--max-run-secs)",
+                max.as_secs_f64()
+            ));
+        }
+        let limit = self.limits.max_memory?;
+        let rss = crate::runtime::memory::resident_bytes()?;
+        (rss > limit).then(|| {
+            format!(
+                "the worker's resident memory, {} MiB, went past its limit of {} MiB (--max-memory-mb)",
+                rss >> 20,
+                limit >> 20
+            )
+        })
+    }
+
+    /// Fails the run for a limit: a task of this host reports the failure
+    /// (the coordinator then aborts the run, as for any failed task).
+    fn fail_for_limit(&mut self, why: &str) -> Result<(), HostError> {
+        self.over_limit = true;
+        tracing::error!("worker: {why}");
+        let layout = &self.host.layout;
+        let here = (0..layout.components())
+            .flat_map(|c| (0..layout.tasks(c)).map(move |t| (c, t)))
+            .find(|&(c, t)| layout.host(c, t) == self.plan.host);
+        if let Some((c, t)) = here {
+            let failed = TaskEvent::Failed(format!("worker limit: {why}"));
+            put(
+                self.session,
+                &self.report_key,
+                Control::Event { component: c as u32, task: t as u32, event: failed },
+            )?;
+        }
+        Ok(())
     }
 
     /// This host's tasks and traffic now.
