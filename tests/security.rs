@@ -360,3 +360,56 @@ fn a_run_past_a_worker_s_time_or_memory_limit_fails_naming_the_limit() {
     assert!(stderr.contains("past its limit of 1 MiB (--max-memory-mb)"), "{stderr}");
     drop(worker);
 }
+
+#[test]
+fn a_worker_hosts_an_unauthenticated_link_beyond_loopback_only_with_its_own_insecure() {
+    // The plan allows it (`insecure = true`), the worker does not: the
+    // plan is refused before anything listens.
+    let dir = tempfile::tempdir().unwrap();
+    let worker = Worker::start(&[], &dir.path().join("w1.log"));
+    let cluster = dir.path().join("lab.toml");
+    let file = format!(
+        "[cluster]\nname = \"lab\"\n\n[[worker]]\nname = \"w1\"\nendpoint = \"{}\"\n\n\
+         [placement]\nsource = [\"w1\"]\n",
+        worker.1
+    );
+    std::fs::write(&cluster, file).unwrap();
+    let endpoint = format!("tcp/0.0.0.0:{}", free_port());
+    let out = squall(&[
+        "run",
+        "examples/topologies/live_slam.toml",
+        "--quiet",
+        "--set",
+        &format!("source.params.listen=[\"{endpoint}\"]"),
+        "--set",
+        "source.params.insecure=true",
+        "--cluster",
+        cluster.to_str().unwrap(),
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "worker \"w1\" refused the run: spout \"source\": insecure: {endpoint} is plain tcp/ beyond loopback"
+        )),
+        "{stderr}"
+    );
+    assert!(stderr.contains("hosts unauthenticated links only if started with --insecure"), "{stderr}");
+    drop(worker);
+}
+
+#[test]
+fn with_insecure_a_live_page_beyond_loopback_is_served_and_warned_of_in_the_metrics() {
+    let dir = tempfile::tempdir().unwrap();
+    let script = format!(
+        "\"$SQUALL\" run examples/topologies/wordcount.toml --quiet --ui 10.9.9.9:0 --insecure --out {}",
+        dir.path().display()
+    );
+    let done = in_private_network(&script);
+    let stderr = text(&done.stderr);
+    assert!(done.status.success(), "{stderr}");
+    assert!(stderr.contains("warning: insecure: --ui 10.9.9.9:0 serves the run beyond loopback"), "{stderr}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()).unwrap();
+    assert!(metrics["warnings"].to_string().contains("insecure: --ui 10.9.9.9:0"), "{}", metrics["warnings"]);
+}

@@ -317,6 +317,9 @@ fn watching_flags_that_cannot_work_are_refused_before_the_run() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = taken.local_addr().unwrap().to_string();
     refused(&["--ui", &addr], &format!("--ui {addr}"));
+    // Beyond loopback, without authentication: only with --insecure.
+    refused(&["--ui", "0.0.0.0:0"], "--ui 0.0.0.0:0: beyond loopback, with no authentication");
+    refused(&["--foxglove", "0.0.0.0:0"], "SSH tunnel (ssh -L), or, on a network you trust, pass --insecure");
 }
 
 /// In a cluster run, the page shows the workers' tasks as they report

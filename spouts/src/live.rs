@@ -357,7 +357,7 @@ async fn next_of(subscriber: &FifoChannelHandler<Sample>) -> Option<Sample> {
 impl Spout for LiveIngest {
     fn declare(&self, d: &mut Declarer) {
         d.output::<LaserReading>("scan");
-        self.link.warnings.iter().for_each(|w| _ = d.warn(w.clone()));
+        self.link.warnings.iter().for_each(|w| _ = d.exposes(w.clone()));
     }
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
@@ -609,7 +609,7 @@ impl LivePublish {
 impl Bolt for LivePublish {
     fn declare(&self, d: &mut Declarer) {
         d.input::<PoseStamped>().input::<OccupancyGrid>();
-        self.link.warnings.iter().for_each(|w| _ = d.warn(w.clone()));
+        self.link.warnings.iter().for_each(|w| _ = d.exposes(w.clone()));
     }
 
     async fn prepare(&mut self, _ctx: &TaskContext) -> Result<(), BoxError> {

@@ -87,7 +87,7 @@ pub(super) fn run_scored(
     if options.stop.is_made() {
         eprintln!("note: stopped early (Ctrl-C or SIGTERM); everything already emitted was processed");
     }
-    let (report, failure) = match result.map_err(RunError::into_parts) {
+    let (mut report, failure) = match result.map_err(RunError::into_parts) {
         Ok(report) => (report, None),
         Err((message, Some(report))) => (report, Some(message)),
         Err((message, None)) => {
@@ -96,6 +96,7 @@ pub(super) fn run_scored(
             return ExitCode::from(EXIT_FAILED);
         }
     };
+    report.warnings.extend(watching.warnings().iter().cloned());
     if let Some(live) = watching.live() {
         live.finish(&report);
     }

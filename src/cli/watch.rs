@@ -49,6 +49,12 @@ pub(super) struct WatchArgs {
     /// with "status": "running"); needs an output folder.
     #[arg(long, value_name = "SECS", value_parser = parse_period)]
     pub(super) metrics_every: Option<f64>,
+    /// Serve --ui and --foxglove beyond loopback, without authentication
+    /// (anyone who reaches them sees the run: its topology, counters,
+    /// poses and maps): on a network you trust only. Warns at start and
+    /// in metrics.json.
+    #[arg(long)]
+    pub(super) insecure: bool,
 }
 
 impl WatchArgs {
@@ -85,6 +91,23 @@ fn check_recordable(path: &Path) -> Result<(), String> {
     };
     squall_topology::fsio::check_writable_dir(dir)
         .map_err(|e| format!("--record {}: cannot write there: {e}", path.display()))
+}
+
+/// Whether `host` (an address or a name) is loopback: reachable from this
+/// machine only. Other names may resolve to addresses others reach.
+fn is_loopback_host(host: &str) -> bool {
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host.eq_ignore_ascii_case("localhost")
+        || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+}
+
+/// The refusal of a view served beyond loopback without `--insecure`.
+fn exposed_view(flag: &str, at: &str) -> String {
+    format!(
+        "{flag} {at}: beyond loopback, with no authentication: anyone who can reach it sees the run (its \
+         topology, counters, poses and maps). Serve it on 127.0.0.1 and reach it through an SSH tunnel \
+         (ssh -L), or, on a network you trust, pass --insecure"
+    )
 }
 
 fn parse_addr(s: &str) -> Result<SocketAddr, String> {
@@ -124,6 +147,9 @@ pub(super) struct Watch {
     live: Option<Arc<LiveRun>>,
     ui: Option<UiServer>,
     foxglove: Option<foxglove::WebSocketServerHandle>,
+    /// What the run's metrics should warn of (views served beyond
+    /// loopback with `--insecure`).
+    warnings: Vec<String>,
     recording: Option<Recording>,
     linger: Duration,
     stop: Option<mpsc::Sender<()>>,
@@ -143,7 +169,29 @@ impl Watch {
         if let Some(path) = &args.record {
             check_recordable(path)?;
         }
+        let mut exposed = Vec::new();
+        if let Some(addr) = args.ui.filter(|a| !a.ip().is_loopback()) {
+            exposed.push(("--ui", addr.to_string()));
+        }
+        if let Some((host, port)) = args.foxglove.as_ref().filter(|(h, _)| !is_loopback_host(h)) {
+            exposed.push(("--foxglove", format!("{host}:{port}")));
+        }
+        if let Some((flag, at)) = exposed.first()
+            && !args.insecure
+        {
+            return Err(exposed_view(flag, at));
+        }
+        let warnings: Vec<String> = exposed
+            .iter()
+            .map(|(flag, at)| {
+                format!("insecure: {flag} {at} serves the run beyond loopback without authentication")
+            })
+            .collect();
+        for w in &warnings {
+            eprintln!("warning: {w} (--insecure)");
+        }
         let mut watch = Watch {
+            warnings,
             live: wanted.then(LiveRun::new),
             ui: None,
             foxglove: None,
@@ -155,13 +203,6 @@ impl Watch {
         let Some(live) = watch.live.clone() else { return Ok(watch) };
         if let Some(addr) = args.ui {
             let server = UiServer::start(addr, live.clone()).map_err(|e| format!("--ui {addr}: {e}"))?;
-            if !server.addr().ip().is_loopback() {
-                eprintln!(
-                    "warning: the live page at {} is open to anyone who can reach this host (it shows \
-                     the run's topology and counters, read-only)",
-                    server.addr()
-                );
-            }
             eprintln!("live page: http://{}/ (Prometheus metrics at /metrics)", server.addr());
             watch.ui = Some(server);
         }
@@ -213,6 +254,11 @@ impl Watch {
     /// The run to hand to the runtime, when anything watches it.
     pub(super) fn live(&self) -> Option<Arc<LiveRun>> {
         self.live.clone()
+    }
+
+    /// What the run's metrics should warn of about how it was watched.
+    pub(super) fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// Stops the periodic writers (before the final metrics.json is

@@ -52,7 +52,8 @@ pub(super) struct WorkerArgs {
     tls: TlsArgs,
     /// Allow plain tcp/ endpoints beyond loopback, without mutual TLS: on
     /// a network you trust only (anyone who reaches the port can make the
-    /// worker run plans). Warns at start.
+    /// worker run plans). Warns at start. Also lets plans place here live
+    /// links that are plain beyond loopback (`insecure = true`).
     #[arg(long)]
     insecure: bool,
 }
@@ -198,7 +199,13 @@ fn worker_limits(args: &WorkerArgs) -> Result<WorkerLimits, String> {
     if args.max_tasks == 0 {
         return Err("--max-tasks 0: expected at least 1".into());
     }
-    Ok(WorkerLimits { max_tasks: args.max_tasks, max_queued: args.max_queued, max_run, max_memory })
+    Ok(WorkerLimits {
+        max_tasks: args.max_tasks,
+        max_queued: args.max_queued,
+        max_run,
+        max_memory,
+        insecure: args.insecure,
+    })
 }
 
 fn report_stop(reason: StopReason) {

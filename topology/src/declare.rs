@@ -62,6 +62,7 @@ pub struct Declarer {
     pub(crate) writes: Vec<PathBuf>,
     pub(crate) input_checks: Vec<InputCheck>,
     pub(crate) warnings: Vec<String>,
+    pub(crate) exposures: Vec<String>,
 }
 
 /// A check of a component's inputs beyond readability (see
@@ -154,6 +155,18 @@ impl Declarer {
     /// starts and listed in the run's `warnings` in metrics.json.
     pub fn warn(&mut self, message: impl Into<String>) -> &mut Self {
         self.warnings.push(message.into());
+        self
+    }
+
+    /// Declares that this component talks over the network beyond
+    /// loopback without authentication (`what` says where: a live link
+    /// on plain `tcp/` allowed by `insecure = true`). It is warned of as
+    /// [`warn`](Self::warn) does, and a worker hosts such a component
+    /// only if it was itself started with `--insecure`.
+    pub fn exposes(&mut self, what: impl Into<String>) -> &mut Self {
+        let what = what.into();
+        self.warnings.push(what.clone());
+        self.exposures.push(what);
         self
     }
 

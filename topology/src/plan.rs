@@ -151,6 +151,17 @@ impl Topology {
         errors
     }
 
+    /// What the components of `hosted` (by index) declared they expose
+    /// ([`Declarer::exposes`]), each naming its component.
+    pub fn exposures(&self, hosted: impl Fn(usize) -> bool) -> Vec<String> {
+        let mut exposures = Vec::new();
+        for (_, c) in self.components.iter().enumerate().filter(|(i, _)| hosted(*i)) {
+            let (role, name) = (c.spec.role, &c.spec.name);
+            exposures.extend(c.declared.exposures.iter().map(|w| format!("{role} \"{name}\": {w}")));
+        }
+        exposures
+    }
+
     /// The warnings the components declared ([`Declarer::warn`]), each
     /// naming its component.
     pub fn declared_warnings(&self) -> Vec<String> {

@@ -43,9 +43,10 @@ fn put(session: &Session, key: &str, control: Control) -> Result<(), HostError> 
 
 /// What one run may take of a worker, whatever its plan asks: the
 /// worker's own bounds (`squall worker --max-tasks`, `--max-queued`,
-/// `--max-run-secs`, `--max-memory-mb`). A plan over the first two is
-/// refused before anything starts; a run past the others fails, naming
-/// the limit.
+/// `--max-run-secs`, `--max-memory-mb`, and `--insecure` for links
+/// without authentication). A plan over the first two, or with such a
+/// link without the last, is refused before anything starts; a run past
+/// the others fails, naming the limit.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct WorkerLimits {
     /// Tasks of one run on this worker.
@@ -58,6 +59,10 @@ pub struct WorkerLimits {
     pub max_run: Option<Duration>,
     /// Resident memory of the worker process, bytes (`None`: unbounded).
     pub max_memory: Option<u64>,
+    /// Whether plans may make this worker talk beyond loopback without
+    /// authentication (a live link with `insecure = true` placed here):
+    /// the worker's own `--insecure`.
+    pub insecure: bool,
 }
 
 impl Default for WorkerLimits {
@@ -69,6 +74,7 @@ impl Default for WorkerLimits {
             max_queued: 1 << 20,
             max_run: None,
             max_memory: crate::runtime::memory::default_limit(),
+            insecure: false,
         }
     }
 }
@@ -84,6 +90,12 @@ impl WorkerLimits {
             let per_task = spec.inputs.iter().map(|i| i.queue).sum::<usize>() + peers;
             tasks += here;
             queued = queued.saturating_add(here.saturating_mul(per_task));
+        }
+        let hosted = |c: usize| (0..layout.tasks(c)).any(|t| layout.host(c, t) == host);
+        if let Some(exposed) = topology.exposures(hosted).first().filter(|_| !self.insecure) {
+            return Some(format!(
+                "{exposed}; this worker hosts unauthenticated links only if started with --insecure"
+            ));
         }
         if tasks > self.max_tasks {
             return Some(format!(
