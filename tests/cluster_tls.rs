@@ -33,7 +33,7 @@ fn a_peer_without_the_clusters_certificate_cannot_join_publish_or_read() {
             connect: vec![],
             tls: Some(tls(dir.path(), "ca", "worker")),
         };
-        let worker = WorkerPresence::start(&worker_options).await.expect("the worker listens with TLS");
+        let worker = WorkerPresence::start(&worker_options, None).await.expect("the worker listens with TLS");
         let member = |name: &str, ca: &str| SessionOptions {
             listen: vec![],
             connect: vec![endpoint.clone()],

@@ -413,3 +413,129 @@ fn with_insecure_a_live_page_beyond_loopback_is_served_and_warned_of_in_the_metr
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()).unwrap();
     assert!(metrics["warnings"].to_string().contains("insecure: --ui 10.9.9.9:0"), "{}", metrics["warnings"]);
 }
+
+#[test]
+fn a_signed_control_is_taken_once_for_its_key_from_an_allowed_coordinator_of_the_authority() {
+    use squall::topology::cluster::identity::{IdentityError, Signer, Verifier};
+    use squall::topology::cluster::wire::{Control, Frame};
+    let dir = tempfile::tempdir().unwrap();
+    common::certs::authority(dir.path(), "ca", &["coordinator", "intruder"]);
+    common::certs::authority(dir.path(), "rogue_ca", &["rogue"]);
+    let tls = |ca: &str, name: &str| common::certs::tls(dir.path(), ca, name);
+    let signer = |ca: &str, name: &str| Signer::load(&tls(ca, name)).unwrap();
+    let (coordinator, intruder, rogue) =
+        (signer("ca", "coordinator"), signer("ca", "intruder"), signer("rogue_ca", "rogue"));
+    assert_eq!(coordinator.name(), "coordinator");
+    let allowed = ["coordinator".to_string()].into_iter().collect();
+    let verifier = Verifier::load(&dir.path().join("ca.pem"), Some(allowed)).unwrap();
+    let signed = |s: &Signer, to: &str| Frame::Signed(Box::new(s.sign(to, "session-1", Control::Stop)));
+    let refusal = |frame: Frame, to: &str| verifier.accept_or_refusal(frame, to).unwrap_err().0.clone();
+
+    let frame = signed(&coordinator, "squall/control/w1");
+    assert_eq!(
+        verifier.accept(frame.clone(), "squall/control/w1"),
+        Some(("coordinator".into(), Control::Stop))
+    );
+    // Taken once: the same frame again is a replay.
+    assert!(matches!(refusal(frame, "squall/control/w1"), IdentityError::Stale { .. }));
+    // Signed for another worker's key.
+    let elsewhere = refusal(signed(&coordinator, "squall/control/w2"), "squall/control/w1");
+    assert!(elsewhere.to_string().contains("a frame for \"squall/control/w2\""), "{elsewhere}");
+    // From the authority, but not on the allowlist.
+    let not_allowed = refusal(signed(&intruder, "squall/control/w1"), "squall/control/w1");
+    assert_eq!(not_allowed, IdentityError::NotAllowed { name: "intruder".into() });
+    assert!(
+        not_allowed.to_string().contains("\"intruder\" is not on this worker's --allow-coordinator list")
+    );
+    // From another authority.
+    assert!(matches!(
+        refusal(signed(&rogue, "squall/control/w1"), "squall/control/w1"),
+        IdentityError::Untrusted(_)
+    ));
+    // Unsigned.
+    assert_eq!(refusal(Frame::Control(Control::Stop), "squall/control/w1"), IdentityError::Unsigned);
+    // Altered after signing.
+    let Frame::Signed(mut altered) = signed(&coordinator, "squall/control/w1") else { unreachable!() };
+    let last = altered.body.len() - 1;
+    altered.body[last] ^= 1;
+    assert!(matches!(
+        refusal(Frame::Signed(altered), "squall/control/w1"),
+        IdentityError::BadSignature { .. }
+    ));
+    assert_eq!(verifier.refused(), 6, "every refusal is counted");
+    // A key that is not the certificate's is refused when it is loaded.
+    let mismatched = squall::topology::cluster::config::TlsSpec {
+        private_key: dir.path().join("intruder.key"),
+        ..tls("ca", "coordinator")
+    };
+    let e = Signer::load(&mismatched).unwrap_err();
+    assert!(e.to_string().contains("is not the key of the certificate"), "{e}");
+}
+
+#[test]
+fn a_worker_takes_plans_only_from_the_coordinators_it_allows_and_names_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    common::certs::authority(dir.path(), "ca", &["worker", "coordinator", "intruder"]);
+    let file = |name: &str| dir.path().join(name).display().to_string();
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let log = dir.path().join("w1.log");
+    let mut worker = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["worker", "--listen", &endpoint, "--allow-coordinator", "coordinator"])
+        .args([
+            "--tls-ca",
+            &file("ca.pem"),
+            "--tls-cert",
+            &file("worker.pem"),
+            "--tls-key",
+            &file("worker.key"),
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let cluster = |name: &str| {
+        let path = dir.path().join(format!("{name}.toml"));
+        let text = format!(
+            "[cluster]\nname = \"lab\"\n\n[[worker]]\nname = \"w1\"\nendpoint = \"{endpoint}\"\n\n\
+             [placement]\nrelay = [\"w1\"]\n\n[tls]\nroot_ca = \"ca.pem\"\ncertificate = \"{name}.pem\"\n\
+             private_key = \"{name}.key\"\n"
+        );
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let intruder = probe_run(&cluster("intruder"), &["source.params.count=2000"]);
+    let stderr = text(&intruder.stderr);
+    assert!(!intruder.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("worker \"w1\" refused the run: coordinator \"intruder\" is not on this worker's --allow-coordinator list"),
+        "{stderr}"
+    );
+    let allowed = probe_run(&cluster("coordinator"), &["source.params.count=2000"]);
+    assert!(allowed.status.success(), "{}", text(&allowed.stderr));
+    // Interrupted, the worker says what it refused.
+    let stopped = Command::new("kill").args(["-INT", &worker.id().to_string()]).status().unwrap();
+    assert!(stopped.success());
+    worker.wait().unwrap();
+    let log = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        log.contains("coordinator \"intruder\" is not on this worker's --allow-coordinator list"),
+        "{log}"
+    );
+    assert!(log.contains("hosting run") && log.contains("of coordinator \"coordinator\""), "{log}");
+    assert!(log.contains("refused 1 control frames"), "{log}");
+}
+
+#[test]
+fn an_allowlist_without_tls_is_refused_before_the_worker_listens() {
+    let out = squall(&[
+        "worker",
+        "--listen",
+        &format!("tcp/127.0.0.1:{}", free_port()),
+        "--allow-coordinator",
+        "lab",
+    ]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("--allow-coordinator needs mutual TLS"), "{stderr}");
+    assert!(!stderr.contains("listening on"), "{stderr}");
+}

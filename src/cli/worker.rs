@@ -3,14 +3,20 @@
 //! token, hosts the runs coordinators ship to it one after another, and
 //! stops when told, or when a coordinator whose run it hosts is gone.
 
+use std::collections::BTreeSet;
 use std::process::ExitCode;
+use std::sync::Arc;
 
 use squall_topology::RunOptions;
+use squall_topology::cluster::config::TlsSpec;
 use squall_topology::cluster::config::{
     Endpoint, WORKER_RISK, exposed_endpoint, exposure_refusal, exposure_warning,
 };
-use squall_topology::cluster::run::{WorkerLimits, host_run};
-use squall_topology::cluster::session::{SessionOptions, StopReason, WorkerPresence, reply_key, worker_key};
+use squall_topology::cluster::identity::Verifier;
+use squall_topology::cluster::run::{HostPolicy, WorkerLimits, host_run};
+use squall_topology::cluster::session::{
+    SessionOptions, Shipped, StopReason, WorkerPresence, reply_key, worker_key,
+};
 use squall_topology::confine::{self, Confinement};
 
 use super::tls::TlsArgs;
@@ -44,6 +50,15 @@ pub(super) struct WorkerArgs {
     /// Unbounded by default (a live robot streams for hours).
     #[arg(long, value_name = "S")]
     max_run_secs: Option<f64>,
+    /// With mutual TLS: take plans only from the coordinator whose
+    /// certificate has this common name (repeatable; with none of these
+    /// and no --allow-coordinators, any certificate from the authority).
+    #[arg(long, value_name = "NAME")]
+    allow_coordinator: Vec<String>,
+    /// With mutual TLS: the coordinators' names allowed, one per line
+    /// (`#` starts a comment), added to --allow-coordinator.
+    #[arg(long, value_name = "FILE")]
+    allow_coordinators: Option<std::path::PathBuf>,
     /// Most resident memory of this worker, MiB; past it the run fails.
     /// The default is 90% of the machine's memory.
     #[arg(long, value_name = "MIB")]
@@ -110,6 +125,13 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
         folder(&args.data_dir, "no files (no --data-dir)"),
         folder(&args.out, "no files (no --out)")
     );
+    let verifier = match coordinator_check(args, tls.as_ref()) {
+        Ok(v) => v.map(Arc::new),
+        Err(e) => {
+            eprintln!("squall worker: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
     let options = SessionOptions { listen: vec![listen.clone()], connect, tls };
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,
@@ -119,7 +141,7 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
         }
     };
     runtime.block_on(async {
-        let mut presence = match WorkerPresence::start(&options).await {
+        let mut presence = match WorkerPresence::start(&options, verifier.clone()).await {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("squall worker: cannot listen on {listen}: {e}");
@@ -137,20 +159,27 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
                     eprintln!("squall worker: interrupted");
                     break;
                 }
-                plan = presence.next_run() => match plan {
-                    Some(plan) => plan,
+                shipped = presence.next_run() => match shipped {
+                    Some(shipped) => shipped,
                     None => break,
                 },
             };
-            eprintln!("squall worker: hosting run {}", plan.run);
+            let Shipped { plan, coordinator } = plan;
+            match &coordinator {
+                Some(name) => eprintln!("squall worker: hosting run {} of coordinator {name:?}", plan.run),
+                None => eprintln!("squall worker: hosting run {}", plan.run),
+            }
             let session = presence.session().clone();
             let reply = reply_key(presence.endpoint());
             let release = presence.releaser();
             let options = RunOptions { out_dir: args.out.clone(), ..RunOptions::default() };
             let limits = limits.clone();
+            let verifier = verifier.clone();
             let hosting = tokio::task::spawn_blocking(move || {
                 let registry = squall::builtin::registry();
-                host_run(&session, &plan, &registry, &reply, &options, &limits, &release)
+                let authority = verifier.as_deref().zip(coordinator.as_deref());
+                let policy = HostPolicy { limits: &limits, authority };
+                host_run(&session, &plan, &registry, &reply, &options, policy, &release)
             });
             tokio::select! {
                 hosted = hosting => match hosted {
@@ -179,6 +208,12 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
         if too_large + malformed > 0 {
             eprintln!("squall worker: refused {too_large} oversized and {malformed} malformed frames");
         }
+        if let Some(v) = presence.verifier().filter(|v| v.refused() > 0) {
+            eprintln!(
+                "squall worker: refused {} control frames (unsigned, not from the authority, or from a coordinator not allowed)",
+                v.refused()
+            );
+        }
         let _ = presence.session().close().await;
         ExitCode::SUCCESS
     })
@@ -206,6 +241,34 @@ fn worker_limits(args: &WorkerArgs) -> Result<WorkerLimits, String> {
         max_memory,
         insecure: args.insecure,
     })
+}
+
+/// The check of coordinators' signatures: with mutual TLS, against the
+/// authority, allowing the names given (any, without names); without
+/// TLS, none (and names are an error: coordinators are known by their
+/// certificates).
+fn coordinator_check(args: &WorkerArgs, tls: Option<&TlsSpec>) -> Result<Option<Verifier>, String> {
+    let mut names: BTreeSet<String> = args.allow_coordinator.iter().cloned().collect();
+    if let Some(file) = &args.allow_coordinators {
+        let text = std::fs::read_to_string(file)
+            .map_err(|e| format!("--allow-coordinators {}: {e}", file.display()))?;
+        names.extend(
+            text.lines()
+                .map(|l| l.split('#').next().unwrap_or("").trim())
+                .filter(|l| !l.is_empty())
+                .map(str::to_string),
+        );
+    }
+    let listed = !names.is_empty() || args.allow_coordinators.is_some();
+    match tls {
+        None if listed => Err("--allow-coordinator needs mutual TLS (--tls-ca, --tls-cert, --tls-key): \
+                               coordinators are known by their certificate's common name"
+            .into()),
+        None => Ok(None),
+        Some(tls) => {
+            Verifier::load(&tls.root_ca, listed.then_some(names)).map(Some).map_err(|e| e.to_string())
+        }
+    }
 }
 
 fn report_stop(reason: StopReason) {

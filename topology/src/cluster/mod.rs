@@ -8,6 +8,8 @@
 
 pub mod config;
 mod error;
+#[cfg(feature = "cluster")]
+pub mod identity;
 pub mod outcome;
 #[cfg(feature = "cluster")]
 pub mod run;

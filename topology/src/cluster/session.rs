@@ -14,6 +14,7 @@ use zenoh::sample::SampleKind;
 
 use crate::cluster::HostError;
 use crate::cluster::config::{Endpoint, EndpointError, TlsSpec};
+use crate::cluster::identity::{Signer, Verifier};
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, Frame, Rejections, RunPlan};
 
 /// Errors opening or using a cluster session.
@@ -142,9 +143,20 @@ pub struct WorkerPresence {
     session: Session,
     rejections: Arc<Rejections>,
     stop: tokio::sync::watch::Receiver<Option<StopReason>>,
-    runs: tokio::sync::mpsc::UnboundedReceiver<Box<RunPlan>>,
+    runs: tokio::sync::mpsc::UnboundedReceiver<Shipped>,
     endpoint: Endpoint,
     hosting: Hosting,
+    verifier: Option<Arc<Verifier>>,
+}
+
+/// A plan a coordinator shipped, and who signed it (with mutual TLS).
+#[derive(Debug)]
+pub struct Shipped {
+    /// The plan.
+    pub plan: Box<RunPlan>,
+    /// The common name of the coordinator's certificate, when the worker
+    /// checks signatures: only it may drive the run.
+    pub coordinator: Option<String>,
 }
 
 /// The coordinators whose runs the worker hosts: if one goes, the worker
@@ -153,7 +165,12 @@ type Hosting = Arc<std::sync::Mutex<std::collections::HashSet<String>>>;
 
 impl WorkerPresence {
     /// Opens the worker's session on `options.listen[0]` and announces it.
-    pub async fn start(options: &SessionOptions) -> Result<Self, SessionError> {
+    /// With a `verifier` (mutual TLS), plans and stop are taken only from
+    /// coordinators it accepts; pings are answered for anyone.
+    pub async fn start(
+        options: &SessionOptions,
+        verifier: Option<Arc<Verifier>>,
+    ) -> Result<Self, SessionError> {
         let endpoint = options
             .listen
             .first()
@@ -171,11 +188,45 @@ impl WorkerPresence {
         let (answer, counts, name) = (session.clone(), rejections.clone(), worker_key(&endpoint));
         let (plans, runs) = tokio::sync::mpsc::unbounded_channel();
         let me = endpoint.clone();
+        let my_key = control_key(&endpoint);
+        let checker = verifier.clone();
         tokio::spawn(async move {
             let _token = token;
             while let Ok(sample) = control.recv_async().await {
                 let bytes = sample.payload().to_bytes();
-                match Frame::decode(&bytes, DEFAULT_MAX_FRAME) {
+                let decoded = Frame::decode(&bytes, DEFAULT_MAX_FRAME);
+                // With a verifier, only what an accepted coordinator
+                // signed is followed (a ping is answered for anyone).
+                let mut signed_by = None;
+                let decoded = match (decoded, &verifier) {
+                    (Ok(ping @ Frame::Control(Control::Ping { .. })), _) => Ok(ping),
+                    (Ok(frame), Some(verifier)) => match verifier.accept_or_refusal(frame, &my_key) {
+                        Ok((coordinator, control)) => {
+                            if let Control::Start(plan) = &control {
+                                tracing::info!(
+                                    "worker {name}: a plan from coordinator {coordinator:?}: {}",
+                                    plan.run
+                                );
+                            }
+                            signed_by = Some(coordinator);
+                            Ok(Frame::Control(control))
+                        }
+                        Err(refused) => {
+                            let (refusal, said) = *refused;
+                            // An authentic plan from a coordinator not
+                            // allowed is told no (others get no answer).
+                            if let Some(Control::Start(plan)) = said {
+                                let no = Control::Refused { run: plan.run, reason: refusal.to_string() };
+                                let _ =
+                                    put_waiting(&answer, reply_key(&endpoint), Frame::Control(no).encode())
+                                        .await;
+                            }
+                            continue;
+                        }
+                    },
+                    (other, _) => other,
+                };
+                match decoded {
                     Ok(Frame::Control(Control::Ping { nonce })) => {
                         let pong = Frame::Control(Control::Pong { nonce, worker: name.clone() });
                         if let Err(e) = put_waiting(&answer, reply_key(&endpoint), pong.encode()).await {
@@ -187,7 +238,7 @@ impl WorkerPresence {
                     }
                     Ok(Frame::Control(Control::Start(plan))) => {
                         hosted.lock().unwrap_or_else(|e| e.into_inner()).insert(plan.coordinator.clone());
-                        let _ = plans.send(plan);
+                        let _ = plans.send(Shipped { plan, coordinator: signed_by });
                     }
                     Ok(other) => tracing::warn!("worker {name}: unexpected on the control key: {other:?}"),
                     Err(e) => {
@@ -197,7 +248,7 @@ impl WorkerPresence {
                 }
             }
         });
-        Ok(WorkerPresence { session, rejections, stop, runs, endpoint: me, hosting })
+        Ok(WorkerPresence { session, rejections, stop, runs, endpoint: me, hosting, verifier: checker })
     }
 
     /// A function that lets the worker outlive a coordinator whose run is
@@ -210,8 +261,13 @@ impl WorkerPresence {
     }
 
     /// The next run a coordinator asks this worker to host.
-    pub async fn next_run(&mut self) -> Option<Box<RunPlan>> {
+    pub async fn next_run(&mut self) -> Option<Shipped> {
         self.runs.recv().await
+    }
+
+    /// The check of coordinators' signatures, with mutual TLS.
+    pub fn verifier(&self) -> Option<&Arc<Verifier>> {
+        self.verifier.as_ref()
     }
 
     /// The endpoint the worker listens on.
@@ -281,6 +337,23 @@ pub(crate) fn send_control(session: &Session, key: &str, control: Control) -> Re
     put_waiting(session, key.to_string(), Frame::Control(control).encode())
         .wait()
         .map_err(|e| HostError::Zenoh(e.to_string()))
+}
+
+/// Sends `control` on `key` as a coordinator: signed with `signer` (the
+/// key of its TLS certificate) when the cluster has TLS, so that a
+/// worker can tell who sent it ([`crate::cluster::identity`]); waiting
+/// for room, as [`send_control`].
+pub(crate) fn send_as_coordinator(
+    session: &Session,
+    key: &str,
+    control: Control,
+    signer: Option<&Signer>,
+) -> Result<(), HostError> {
+    let frame = match signer {
+        Some(signer) => Frame::Signed(Box::new(signer.sign(key, &coordinator_id(session), control))),
+        None => Frame::Control(control),
+    };
+    put_waiting(session, key.to_string(), frame.encode()).wait().map_err(|e| HostError::Zenoh(e.to_string()))
 }
 
 /// A put of `bytes` on `key` that waits for room on the link instead of
@@ -383,7 +456,7 @@ mod tests {
     async fn worker_and_coordinator() -> (Endpoint, WorkerPresence, Session) {
         let endpoint = free_endpoint();
         let worker_options = SessionOptions { listen: vec![endpoint.clone()], ..SessionOptions::default() };
-        let worker = WorkerPresence::start(&worker_options).await.unwrap();
+        let worker = WorkerPresence::start(&worker_options, None).await.unwrap();
         let coordinator =
             open(&SessionOptions { connect: vec![endpoint.clone()], ..SessionOptions::default() })
                 .await
@@ -438,7 +511,7 @@ mod tests {
         let mut worker = worker;
         let shipped =
             tokio::time::timeout(Duration::from_secs(10), worker.next_run()).await.unwrap().unwrap();
-        assert_eq!(shipped.coordinator, coordinator_id(&coordinator));
+        assert_eq!(shipped.plan.coordinator, coordinator_id(&coordinator));
         // Once the worker's side sees the coordinator's token, it dies.
         let seen = async {
             loop {

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 const MAGIC: [u8; 2] = *b"SQ";
 /// The frame format; a peer speaking another is refused (2: batches of
 /// tuples travel as one frame).
-pub const WIRE_VERSION: u8 = 3;
+pub const WIRE_VERSION: u8 = 4;
 /// Frames larger than this are refused unread, unless the cluster sets
 /// another limit: a map with its tiles fits many times over.
 pub const DEFAULT_MAX_FRAME: usize = 64 << 20;
@@ -64,6 +64,53 @@ pub enum Frame {
         /// The messages, each postcard-encoded as the stream's type.
         payloads: Vec<Vec<u8>>,
     },
+    /// A control from a coordinator, signed with its certificate's key
+    /// (see [`crate::cluster::identity`]).
+    Signed(Box<Signed>),
+}
+
+/// The signature algorithms, as the wire names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Algorithm {
+    /// ECDSA on P-256 with SHA-256 (openssl's `-newkey ec` with prime256v1).
+    EcdsaP256Sha256,
+    /// ECDSA on P-384 with SHA-384.
+    EcdsaP384Sha384,
+    /// Ed25519.
+    Ed25519,
+    /// RSA PKCS#1 v1.5 with SHA-256.
+    RsaPkcs1Sha256,
+}
+
+/// What a coordinator signs: the control and what makes it fresh and
+/// addressed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SignedBody {
+    /// The key it is sent on (a worker's control key, a run's): a frame
+    /// for one worker or run is no good on another's.
+    pub to: String,
+    /// The coordinator's session, and a counter that only grows within
+    /// it: a frame seen once is not taken again.
+    pub coordinator: String,
+    /// See `coordinator`.
+    pub counter: u64,
+    /// When it was signed, ms since the Unix epoch.
+    pub issued_ms: u64,
+    /// What the coordinator says.
+    pub control: Control,
+}
+
+/// A signed control frame's parts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Signed {
+    /// The coordinator's certificate chain, DER, leaf first.
+    pub certificates: Vec<Vec<u8>>,
+    /// The signature's algorithm.
+    pub algorithm: Algorithm,
+    /// The postcard bytes of a [`SignedBody`].
+    pub body: Vec<u8>,
+    /// The signature over `body`.
+    pub signature: Vec<u8>,
 }
 
 /// A run as the coordinator ships it to a worker.

@@ -13,9 +13,12 @@ use zenoh::Session;
 use zenoh::Wait;
 
 use crate::cluster::config::ClusterSpec;
+use crate::cluster::identity::Signer;
 use crate::cluster::run::host::{HostRun, HostTotals};
 use crate::cluster::run::layout::Layout;
-use crate::cluster::session::{self, SessionOptions, control_key, reply_key, send_control, worker_key};
+use crate::cluster::session::{
+    self, SessionOptions, control_key, reply_key, send_as_coordinator, worker_key,
+};
 use crate::cluster::wire::{Control, DEFAULT_MAX_FRAME, EdgeTraffic, Frame, RunPlan, TaskEvent};
 use crate::metrics::{EdgeReport, RunReport, TaskOutcome};
 use crate::plan::Topology;
@@ -85,8 +88,11 @@ pub fn run_on_cluster(
     }
     let connect = cluster.workers.iter().map(|w| w.endpoint.clone()).collect();
     let session_options = SessionOptions { listen: Vec::new(), connect, tls: cluster.tls.clone() };
+    // With TLS, what the coordinator tells workers is signed with its
+    // certificate's key: they check who sent it.
+    let signer = cluster.tls.as_ref().map(Signer::load).transpose().map_err(setup)?;
     let session = io.block_on(session::open(&session_options)).map_err(setup)?;
-    let result = coordinate(topology, cluster, options, &session, &io);
+    let result = coordinate(topology, cluster, options, &session, &io, signer.as_ref());
     let _ = session.close().wait();
     io.shutdown_background();
     result
@@ -100,6 +106,7 @@ fn coordinate(
     options: &RunOptions,
     session: &Session,
     io: &tokio::runtime::Runtime,
+    signer: Option<&Signer>,
 ) -> Result<RunReport, ClusterRunError> {
     reach_workers(cluster, session, io)?;
     let hosts = placement(topology, cluster)?;
@@ -124,9 +131,9 @@ fn coordinate(
         subscribe_to_reports(session, &plan(0).report_key(), events_tx.clone(), up_tx, watched.clone())?;
     let mut local =
         HostRun::build(topology, layout.clone(), session, &run, (0, host_count), options).map_err(setup)?;
-    start_workers(cluster, session, &plan)?;
+    start_workers(cluster, session, &plan, signer)?;
     let control = plan(0).control_key();
-    send_control(session, &control, Control::Go).map_err(setup)?;
+    send_as_coordinator(session, &control, Control::Go, signer).map_err(setup)?;
     let started = Instant::now();
     local.start(topology, options, &events_tx).map_err(setup)?;
     // The traffic this process's own tasks send, for the live view, each
@@ -153,6 +160,7 @@ fn coordinate(
         cluster,
         events: events_tx,
         session,
+        signer,
         control: control.clone(),
         up: &up,
         workers: (1..host_count as u16).collect(),
@@ -167,7 +175,7 @@ fn coordinate(
     let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options.abort_grace);
     drop(traffic_stop);
     let ended = hosts_view.end();
-    send_control(session, &control, Control::Collect).map_err(setup)?;
+    send_as_coordinator(session, &control, Control::Collect, signer).map_err(setup)?;
     let mut gathered = Gathered::new(topology, ended.warnings);
     gathered.local(&mut local, failure.is_none());
     gathered.workers(cluster, &up, ended.stash, &ended.lost);
@@ -405,12 +413,13 @@ fn start_workers(
     cluster: &ClusterSpec,
     session: &Session,
     plan: &dyn Fn(u16) -> RunPlan,
+    signer: Option<&Signer>,
 ) -> Result<(), ClusterRunError> {
     let mut replies = Vec::new();
     for (w, worker) in cluster.workers.iter().enumerate() {
         let subscriber = session.declare_subscriber(reply_key(&worker.endpoint)).wait().map_err(setup)?;
         let start = Control::Start(Box::new(plan(w as u16 + 1)));
-        send_control(session, &control_key(&worker.endpoint), start).map_err(setup)?;
+        send_as_coordinator(session, &control_key(&worker.endpoint), start, signer).map_err(setup)?;
         replies.push(subscriber);
     }
     let deadline = Instant::now() + READY;
@@ -460,6 +469,8 @@ struct ClusterHosts<'a> {
     /// For the tasks that move to the coordinator's process.
     events: mpsc::Sender<Event>,
     session: &'a Session,
+    /// Signs what is sent to the workers (with TLS).
+    signer: Option<&'a Signer>,
     control: String,
     up: &'a mpsc::Receiver<Up>,
     /// Workers still in the run.
@@ -502,7 +513,7 @@ impl Hosts for &mut ClusterHosts<'_> {
     fn advance(&mut self, component: usize, stage: Stage) {
         self.local.advance(component, stage);
         let advance = Control::Advance { component: component as u32, stage: stage as u8 };
-        if let Err(e) = send_control(self.session, &self.control, advance) {
+        if let Err(e) = send_as_coordinator(self.session, &self.control, advance, self.signer) {
             tracing::warn!("coordinator: cannot reach the workers: {e}");
         }
     }
@@ -513,7 +524,7 @@ impl Hosts for &mut ClusterHosts<'_> {
         self.add(&mut sum, local);
         let nonce = self.next_nonce;
         self.next_nonce += 1;
-        send_control(self.session, &self.control, Control::Status { nonce }).ok()?;
+        send_as_coordinator(self.session, &self.control, Control::Status { nonce }, self.signer).ok()?;
         let mut waiting = self.workers.clone();
         let deadline = Instant::now() + STATUS;
         while !waiting.is_empty() {
@@ -570,7 +581,8 @@ impl Hosts for &mut ClusterHosts<'_> {
         let moves: Vec<(usize, usize, u16)> =
             tasks.iter().enumerate().map(|(i, &(c, t))| (c, t, survivors[i % survivors.len()])).collect();
         let wire = moves.iter().map(|&(c, t, h)| (c as u32, t as u32, h)).collect();
-        send_control(self.session, &self.control, Control::Reassign { lost: host, moves: wire })
+        let reassign = Control::Reassign { lost: host, moves: wire };
+        send_as_coordinator(self.session, &self.control, reassign, self.signer)
             .map_err(|e| lost_at(e.to_string()))?;
         self.local.reassign(self.topology, self.options, &self.events, &moves).map_err(|e| {
             lost_at(format!("failed: cannot start it again in the coordinator's process: {e}"))

@@ -12,4 +12,4 @@ mod worker;
 
 pub use coordinator::{ClusterRunError, run_on_cluster};
 pub use layout::COORDINATOR;
-pub use worker::{Hosted, WorkerLimits, host_run};
+pub use worker::{HostPolicy, Hosted, WorkerLimits, host_run};

@@ -10,6 +10,7 @@ use zenoh::Session;
 use zenoh::Wait;
 
 use crate::cluster::HostError;
+use crate::cluster::identity::Verifier;
 use crate::cluster::run::host::{HostRun, HostTotals};
 use crate::cluster::run::layout::Layout;
 use crate::cluster::session::send_control;
@@ -63,6 +64,17 @@ pub struct WorkerLimits {
     /// authentication (a live link with `insecure = true` placed here):
     /// the worker's own `--insecure`.
     pub insecure: bool,
+}
+
+/// What a worker holds a run to: its limits, and, with mutual TLS, the
+/// check of signatures and the name of the coordinator whose plan it is
+/// (only it may drive the run).
+#[derive(Debug, Clone, Copy)]
+pub struct HostPolicy<'a> {
+    /// The worker's bounds.
+    pub limits: &'a WorkerLimits,
+    /// The signature check and the plan's coordinator.
+    pub authority: Option<(&'a Verifier, &'a str)>,
 }
 
 impl Default for WorkerLimits {
@@ -124,9 +136,10 @@ pub fn host_run(
     registry: &Registry,
     reply_key: &str,
     options: &RunOptions,
-    limits: &WorkerLimits,
+    policy: HostPolicy<'_>,
     release: &dyn Fn(&str),
 ) -> Result<Hosted, HostError> {
+    let HostPolicy { limits, authority } = policy;
     let refuse = |reason: HostError| {
         release(&plan.coordinator);
         let _ =
@@ -136,7 +149,9 @@ pub fn host_run(
     // The tasks publish their counters, for the reports of `Control::Live`.
     let live = crate::live::LiveRun::new();
     let options = &RunOptions { live: Some(live.clone()), ..options.clone() };
-    let (topology, control, mut host) = prepare(session, plan, registry, options, limits).map_err(refuse)?;
+    let (topology, mut control, mut host) =
+        prepare(session, plan, registry, options, limits).map_err(refuse)?;
+    control.authority = authority.map(|(verifier, name)| (verifier, name.to_string(), plan.control_key()));
     put(session, reply_key, Control::Ready { run: plan.run.clone() })?;
     let name = topology.name().to_string();
     if !control.wait_for_go()? {
@@ -184,7 +199,7 @@ fn prepare(
     registry: &Registry,
     options: &RunOptions,
     limits: &WorkerLimits,
-) -> Result<(Topology, ControlInbox, HostRun), HostError> {
+) -> Result<(Topology, ControlInbox<'static>, HostRun), HostError> {
     let topology = TopologySpec::parse(&plan.file, &plan.topology)
         .and_then(|spec| Topology::validate(spec, registry))
         .map_err(HostError::Invalid)?;
@@ -207,24 +222,29 @@ fn prepare(
         .declare_subscriber(plan.control_key())
         .wait()
         .map_err(|e| HostError::transport("cannot subscribe to run control", e))?;
-    let control = ControlInbox { subscriber, refused: Rejections::default() };
+    let control = ControlInbox { subscriber, refused: Rejections::default(), authority: None };
     let hosts = (plan.host, usize::from(plan.host_count));
     let host = HostRun::build(&topology, layout, session, &plan.run, hosts, options)?;
     Ok((topology, control, host))
 }
 
 /// The coordinator's run control messages, as this worker receives them;
-/// frames that do not decode are counted, not followed.
-struct ControlInbox {
+/// frames that do not decode are counted, not followed. With an
+/// authority (mutual TLS), only frames the plan's own coordinator signed
+/// for this run's key are followed.
+struct ControlInbox<'a> {
     subscriber: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     refused: Rejections,
+    /// The check, the coordinator's name and the run's control key.
+    authority: Option<(&'a Verifier, String, String)>,
 }
 
-impl ControlInbox {
+impl ControlInbox<'_> {
     /// The next control message within `wait`, if any.
     fn next(&self, wait: Duration) -> Result<Option<Control>, HostError> {
         match self.subscriber.recv_timeout(wait) {
             Ok(Some(sample)) => match Frame::decode(&sample.payload().to_bytes(), DEFAULT_MAX_FRAME) {
+                Ok(frame) if self.authority.is_some() => Ok(self.authorized(frame)),
                 Ok(Frame::Control(c)) => Ok(Some(c)),
                 Ok(_) => Ok(None),
                 Err(e) => {
@@ -236,6 +256,20 @@ impl ControlInbox {
             Ok(None) => Ok(None),
             Err(e) => Err(HostError::ControlClosed(e.to_string())),
         }
+    }
+
+    /// What `frame` says, if the run's own coordinator signed it for
+    /// this run; a refusal is logged and counted.
+    fn authorized(&self, frame: Frame) -> Option<Control> {
+        let (verifier, coordinator, key) = self.authority.as_ref()?;
+        let (name, control) = verifier.accept(frame, key)?;
+        if name != *coordinator {
+            verifier.count_refusal(&format!(
+                "coordinator {name:?} tried to drive a run of coordinator {coordinator:?}"
+            ));
+            return None;
+        }
+        Some(control)
     }
 
     /// Waits (at most `PATIENCE`) for `Go`: true once it comes, false if
