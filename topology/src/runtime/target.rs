@@ -31,6 +31,7 @@ impl Target {
     /// queue cannot take stays in `tuples`. Tuples dropped by policy or
     /// refused by an exited consumer fail their acking trees; only an
     /// abort is an error.
+    #[cfg_attr(not(feature = "cluster"), allow(clippy::infallible_destructuring_match))]
     pub(crate) async fn deliver_batch(
         &self,
         tuples: &mut Vec<Tuple>,
