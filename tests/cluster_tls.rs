@@ -32,22 +32,28 @@ fn a_peer_without_the_clusters_certificate_cannot_join_publish_or_read() {
             listen: vec![endpoint.clone()],
             connect: vec![],
             tls: Some(tls(dir.path(), "ca", "worker")),
+            allow: None,
         };
         let worker = WorkerPresence::start(&worker_options, None).await.expect("the worker listens with TLS");
         let member = |name: &str, ca: &str| SessionOptions {
             listen: vec![],
             connect: vec![endpoint.clone()],
             tls: Some(tls(dir.path(), ca, name)),
+            allow: None,
         };
         // A rogue peer that trusts the cluster's authority (its
         // certificate is public) but holds a certificate from another: the
         // worker must refuse it, and what it publishes does not arrive.
         let rogue_tls =
             TlsSpec { root_ca: dir.path().join("ca.pem"), ..tls(dir.path(), "rogue_ca", "rogue") };
-        let rogue =
-            open(&SessionOptions { listen: vec![], connect: vec![endpoint.clone()], tls: Some(rogue_tls) })
-                .await
-                .unwrap();
+        let rogue = open(&SessionOptions {
+            listen: vec![],
+            connect: vec![endpoint.clone()],
+            tls: Some(rogue_tls),
+            allow: None,
+        })
+        .await
+        .unwrap();
         let refused = ping(&rogue, &endpoint, Duration::from_secs(2)).await;
         assert!(matches!(refused, Err(SessionError::NoAnswer { .. })), "{refused:?}");
         rogue.put(control_key(&endpoint), Frame::Control(Control::Stop).encode()).await.unwrap();
@@ -66,7 +72,9 @@ fn a_peer_without_the_clusters_certificate_cannot_join_publish_or_read() {
         let heard = tokio::time::timeout(Duration::from_millis(500), overheard.recv_async()).await;
         assert!(heard.is_err(), "the rogue read a reply");
         // A peer with no certificate at all gets nowhere either.
-        let bare = open(&SessionOptions { listen: vec![], connect: vec![endpoint.clone()], tls: None }).await;
+        let bare =
+            open(&SessionOptions { listen: vec![], connect: vec![endpoint.clone()], tls: None, allow: None })
+                .await;
         if let Ok(bare) = bare {
             let refused = ping(&bare, &endpoint, Duration::from_secs(2)).await;
             assert!(matches!(refused, Err(SessionError::NoAnswer { .. })), "{refused:?}");

@@ -303,3 +303,58 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
     assert_eq!(custom(&metrics, "source", "scans_received"), 60, "{report}");
     assert!(number(&report, "poses received:") >= 54, "{report}");
 }
+
+#[test]
+fn with_an_allowlist_the_link_takes_only_the_robots_it_names_and_counts_the_others() {
+    let certs = tempfile::tempdir().unwrap();
+    common::certs::authority(certs.path(), "ca", &["squall", "robot", "intruder"]);
+    let file = |name: &str| certs.path().join(name).display().to_string();
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let listen = format!("[\"{endpoint}\"]");
+    let tls = format!(
+        "{{ root_ca = {:?}, certificate = {:?}, private_key = {:?} }}",
+        file("ca.pem"),
+        file("squall.pem"),
+        file("squall.key")
+    );
+    let out = tempfile::tempdir().unwrap();
+    let sets = [
+        format!("source.params.tls={tls}"),
+        format!("publish.params.tls={tls}"),
+        "source.params.allow_robots=[\"robot\"]".to_string(),
+        "publish.params.allow_robots=[\"robot\"]".to_string(),
+        "source.params.idle_secs=2.0".to_string(),
+    ];
+    let run = start_live(&listen, &sets, out.path());
+    let robot = |name: &str, scans: &str, connect_secs: &str| {
+        output(
+            Command::new(env!("CARGO_BIN_EXE_squall"))
+                .args(["robot", "--log"])
+                .arg(aces())
+                .args(["--connect", &endpoint, "--max-scans", scans, "--speed", "5"])
+                .args(["--connect-secs", connect_secs, "--tls-ca", &file("ca.pem")])
+                .args([
+                    "--tls-cert",
+                    &file(&format!("{name}.pem")),
+                    "--tls-key",
+                    &file(&format!("{name}.key")),
+                ]),
+        )
+    };
+    // An intruder with a certificate from the same authority links, but
+    // nothing it sends is taken and no topology answers it.
+    let intruder = robot("intruder", "20", "3");
+    assert_eq!(intruder.status.code(), Some(1), "{}", String::from_utf8_lossy(&intruder.stderr));
+    let member = robot("robot", "40", "20");
+    let report = String::from_utf8_lossy(&member.stdout).to_string();
+    assert!(member.status.success(), "{report}{}", String::from_utf8_lossy(&member.stderr));
+    let ran = finish_within(run, HUNG, String::new);
+    let run_log = String::from_utf8_lossy(&ran.stderr).to_string();
+    assert!(ran.status.success(), "run: {run_log}");
+    assert!(run_log.contains("refused peer \"intruder\""), "{run_log}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(custom(&metrics, "source", "scans_received"), 40, "{report}");
+    assert!(custom(&metrics, "source", "robots_refused") >= 1, "{}", metrics["components"]);
+    assert!(number(&report, "poses received:") >= 36, "{report}");
+}

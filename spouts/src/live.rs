@@ -30,7 +30,9 @@ use squall_core::sensor::{LaserReading, PoseStamped};
 use squall_topology::cluster::config::{
     LIVE_LINK_RISK, TlsSpec, exposed_endpoint, exposure_refusal, exposure_warning, mismatched_endpoint,
 };
-use squall_topology::cluster::session::{SessionOptions, endpoints, shared};
+use squall_topology::cluster::session::{
+    RefusedPeers, SessionOptions, endpoints, shared, shared_with_refusals,
+};
 use squall_topology::{
     Bolt, BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
     Tuple,
@@ -116,6 +118,9 @@ struct LinkParams {
     /// (a network the user trusts); every run then warns.
     #[serde(default)]
     insecure: bool,
+    /// With `tls`: the only robots (certificate common names) the link
+    /// talks to; others are refused, logged by name and counted.
+    allow_robots: Option<Vec<String>>,
     /// ROS domain id (`ROS_DOMAIN_ID`).
     #[serde(default)]
     domain_id: u32,
@@ -158,7 +163,7 @@ fn topic(what: &str, name: &str) -> Result<String, ParamError> {
 impl Link {
     fn from_params(p: LinkParams) -> Result<Link, ParamError> {
         rmw_zenoh::node_name(&p.node).map_err(|e| ParamError::new(format!("node: {e}")))?;
-        let options = session_options(&p.listen, &p.connect, p.tls)?;
+        let options = session_options(&p.listen, &p.connect, p.tls, p.allow_robots)?;
         let endpoints = || options.listen.iter().chain(&options.connect);
         if let Some(exposed) = exposed_endpoint(endpoints())
             && !p.insecure
@@ -204,6 +209,7 @@ fn session_options(
     listen: &[String],
     connect: &[String],
     tls: Option<TlsParams>,
+    allow: Option<Vec<String>>,
 ) -> Result<SessionOptions, ParamError> {
     let listen = endpoints(listen).map_err(ParamError::new)?;
     let connect = endpoints(connect).map_err(ParamError::new)?;
@@ -219,7 +225,18 @@ fn session_options(
         let why = if tls.is_some() { "with `tls`, endpoints are tls/" } else { "tls/ endpoints need `tls`" };
         return Err(ParamError::new(format!("{e}: {why}")));
     }
-    Ok(SessionOptions { listen, connect, tls })
+    match &allow {
+        Some(_) if tls.is_none() => {
+            return Err(ParamError::new(
+                "allow_robots needs `tls`: robots are known by their certificate's common name",
+            ));
+        }
+        Some(names) if names.is_empty() || names.iter().any(|n| n.trim().is_empty()) => {
+            return Err(ParamError::new("allow_robots: expected the robots' certificate names, none empty"));
+        }
+        _ => {}
+    }
+    Ok(SessionOptions { listen, connect, tls, allow })
 }
 
 /// Refuses parameters neither the link nor the component knows.
@@ -232,12 +249,13 @@ fn no_unknown(unknown: &toml::Table, known: &[&str]) -> Result<(), ParamError> {
     }
 }
 
-const LINK_FIELDS: [&str; 11] = [
+const LINK_FIELDS: [&str; 12] = [
     "listen",
     "connect",
     "format",
     "tls",
     "insecure",
+    "allow_robots",
     "domain_id",
     "node",
     "odom_topic",
@@ -295,6 +313,9 @@ pub struct LiveIngest {
     /// Scans emitted, for the progress display (no total: the robot
     /// decides when it ends).
     readings: ReadingCounter,
+    /// Robots refused by `allow_robots` so far, and how many of them are
+    /// counted in the metrics.
+    refused: Option<(RefusedPeers, u64)>,
 }
 
 impl LiveIngest {
@@ -323,6 +344,7 @@ impl LiveIngest {
             inputs: None,
             odometry,
             readings: ReadingCounter::default(),
+            refused: None,
         })
     }
 
@@ -362,7 +384,8 @@ impl Spout for LiveIngest {
 
     async fn open(&mut self, ctx: &TaskContext) -> Result<(), BoxError> {
         self.readings = ctx.readings("scans", || None);
-        let session = shared(&self.link.options).await?;
+        let (session, refused) = shared_with_refusals(&self.link.options).await?;
+        self.refused = refused.map(|r| (r, 0));
         self.inputs = Some(match self.link.format {
             Format::Ros2 => {
                 let node = RosNode::shared(&session, self.link.domain, &self.link.node).await?;
@@ -382,6 +405,20 @@ impl Spout for LiveIngest {
     }
 
     async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
+        let status = self.next_scan(out).await;
+        // Robots refused since (each logged by name as it linked).
+        if let Some((refused, counted)) = &mut self.refused {
+            let now = refused.load(std::sync::atomic::Ordering::Relaxed);
+            out.count("robots_refused", now - *counted);
+            *counted = now;
+        }
+        status
+    }
+}
+
+impl LiveIngest {
+    /// Waits for the next scan (odometry meanwhile) and emits it, or ends.
+    async fn next_scan(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
         loop {
             let idle = async {
                 match self.idle {

@@ -107,7 +107,12 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
             return ExitCode::from(EXIT_FAILED);
         }
     };
-    match runtime.block_on(play(args, SessionOptions { connect, listen: Vec::new(), tls }, format, &scans)) {
+    match runtime.block_on(play(
+        args,
+        SessionOptions { connect, listen: Vec::new(), tls, allow: None },
+        format,
+        &scans,
+    )) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("squall robot: {e}");

@@ -132,7 +132,7 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let options = SessionOptions { listen: vec![listen.clone()], connect, tls };
+    let options = SessionOptions { listen: vec![listen.clone()], connect, tls, allow: None };
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,
         Err(e) => {

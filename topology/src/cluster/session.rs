@@ -46,6 +46,10 @@ pub struct SessionOptions {
     pub connect: Vec<Endpoint>,
     /// Mutual TLS material.
     pub tls: Option<TlsSpec>,
+    /// With mutual TLS: the only certificate common names that may talk
+    /// to this session (everything from others is dropped by zenoh's
+    /// access control); `None`: any certificate from the authority.
+    pub allow: Option<Vec<String>>,
 }
 
 /// Opens a session: peer mode, only the given endpoints, no multicast
@@ -74,6 +78,24 @@ pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
         set("transport/link/tls/connect_certificate", path(&tls.certificate))?;
         set("transport/link/tls/connect_private_key", path(&tls.private_key))?;
         set("transport/link/tls/enable_mtls", "true".into())?;
+        if let Some(allowed) = &options.allow {
+            // Deny by default; allow every message both ways to and from
+            // the names allowed. A peer whose certificate is not on the
+            // list keeps its link but gets nothing through.
+            let names: Vec<String> = allowed.iter().map(|n| format!("{n:?}")).collect();
+            let acl = format!(
+                r#"{{ enabled: true, default_permission: "deny",
+                    rules: [{{ id: "all", permission: "allow", flows: ["ingress", "egress"],
+                              messages: ["put", "delete", "declare_subscriber", "query", "declare_queryable",
+                                         "reply", "liveliness_token", "declare_liveliness_subscriber",
+                                         "liveliness_query"],
+                              key_exprs: ["**"] }}],
+                    subjects: [{{ id: "allowed", cert_common_names: [{}] }}],
+                    policies: [{{ rules: ["all"], subjects: ["allowed"] }}] }}"#,
+                names.join(", ")
+            );
+            set("access_control", acl)?;
+        }
     }
     zenoh::open(config).await.map_err(zenoh_error)
 }
@@ -83,16 +105,61 @@ pub async fn open(options: &SessionOptions) -> Result<Session, SessionError> {
 /// ingest spout and publisher bolt) share one session, so a robot that
 /// connects to it reaches both.
 pub async fn shared(options: &SessionOptions) -> Result<Session, SessionError> {
-    static SESSIONS: tokio::sync::Mutex<Vec<(SessionOptions, Session)>> =
-        tokio::sync::Mutex::const_new(Vec::new());
+    shared_with_refusals(options).await.map(|(session, _)| session)
+}
+
+/// Peers refused so far by a session's allowlist.
+pub type RefusedPeers = Arc<std::sync::atomic::AtomicU64>;
+
+/// [`shared`], and, for a session with an allowlist, the count of peers
+/// it refused ([`watch_refused_peers`]).
+pub async fn shared_with_refusals(
+    options: &SessionOptions,
+) -> Result<(Session, Option<RefusedPeers>), SessionError> {
+    type Opened = (SessionOptions, Session, Option<RefusedPeers>);
+    static SESSIONS: tokio::sync::Mutex<Vec<Opened>> = tokio::sync::Mutex::const_new(Vec::new());
     let mut sessions = SESSIONS.lock().await;
-    sessions.retain(|(_, s)| !s.is_closed());
-    if let Some((_, session)) = sessions.iter().find(|(o, _)| o == options) {
-        return Ok(session.clone());
+    sessions.retain(|(_, s, _)| !s.is_closed());
+    if let Some((_, session, refused)) = sessions.iter().find(|(o, _, _)| o == options) {
+        return Ok((session.clone(), refused.clone()));
     }
     let session = open(options).await?;
-    sessions.push((options.clone(), session.clone()));
-    Ok(session)
+    let refused = match &options.allow {
+        Some(allowed) => Some(watch_refused_peers(&session, allowed.clone()).await?),
+        None => None,
+    };
+    sessions.push((options.clone(), session.clone(), refused.clone()));
+    Ok((session, refused))
+}
+
+/// Logs, by the name on its certificate, and counts every peer that
+/// links to `session` with a name not in `allowed`: the session's access
+/// control lets nothing it sends through, and sends it nothing.
+pub async fn watch_refused_peers(
+    session: &Session,
+    allowed: Vec<String>,
+) -> Result<RefusedPeers, SessionError> {
+    let refused = RefusedPeers::default();
+    let events = session.info().link_events_listener().history(true).await.map_err(zenoh_error)?;
+    let counter = refused.clone();
+    tokio::spawn(async move {
+        while let Ok(event) = events.recv_async().await {
+            if event.kind() != SampleKind::Put {
+                continue;
+            }
+            let link = event.link();
+            let name = link.auth_identifier().unwrap_or("(no certificate name)");
+            if !allowed.iter().any(|a| a == name) {
+                counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                tracing::warn!(
+                    "refused peer {name:?} ({}, from {}): not on the allowlist; nothing it sends is taken",
+                    link.zid(),
+                    link.dst()
+                );
+            }
+        }
+    });
+    Ok(refused)
 }
 
 /// Parses endpoint strings (component parameters, command-line flags).

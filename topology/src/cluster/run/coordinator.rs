@@ -87,7 +87,8 @@ pub fn run_on_cluster(
         tracing::warn!("{warning}");
     }
     let connect = cluster.workers.iter().map(|w| w.endpoint.clone()).collect();
-    let session_options = SessionOptions { listen: Vec::new(), connect, tls: cluster.tls.clone() };
+    let session_options =
+        SessionOptions { listen: Vec::new(), connect, tls: cluster.tls.clone(), allow: None };
     // With TLS, what the coordinator tells workers is signed with its
     // certificate's key: they check who sent it.
     let signer = cluster.tls.as_ref().map(Signer::load).transpose().map_err(setup)?;
