@@ -511,7 +511,8 @@ fn a_worker_takes_plans_only_from_the_coordinators_it_allows_and_names_the_other
         "{stderr}"
     );
     let allowed = probe_run(&cluster("coordinator"), &["source.params.count=2000"]);
-    assert!(allowed.status.success(), "{}", text(&allowed.stderr));
+    let worker_log = || std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(allowed.status.success(), "{}\n--- worker ---\n{}", text(&allowed.stderr), worker_log());
     // Interrupted, the worker says what it refused.
     let stopped = Command::new("kill").args(["-INT", &worker.id().to_string()]).status().unwrap();
     assert!(stopped.success());

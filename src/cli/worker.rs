@@ -166,7 +166,7 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             };
             let Shipped { plan, coordinator } = plan;
             match &coordinator {
-                Some(name) => eprintln!("squall worker: hosting run {} of coordinator {name:?}", plan.run),
+                Some(name) => eprintln!("squall worker: hosting run {} of coordinator {name:?} ({})", plan.run, plan.coordinator),
                 None => eprintln!("squall worker: hosting run {}", plan.run),
             }
             let session = presence.session().clone();

@@ -384,16 +384,43 @@ async fn watch_coordinators(
     hosting: Hosting,
 ) -> Result<(), SessionError> {
     let mut tokens = watch_tokens(session, COORDINATORS).await?;
+    let session = session.clone();
     tokio::spawn(async move {
         while let Some((key, up)) = tokens.recv().await {
-            let hosts_its_run = || hosting.lock().unwrap_or_else(|e| e.into_inner()).contains(&key);
-            if !up && hosts_its_run() {
-                tracing::warn!("worker: the coordinator {key} is gone; stopping");
-                let _ = stopped.send(Some(StopReason::CoordinatorLost));
+            let hosts_its_run = {
+                let hosting = hosting.clone();
+                let key = key.clone();
+                move || hosting.lock().unwrap_or_else(|e| e.into_inner()).contains(&key)
+            };
+            if up || !hosts_its_run() {
+                continue;
             }
+            // A token can go and come back as links between peers are
+            // made and dropped (two coordinators, one leaving as the next
+            // links): the coordinator is gone only if its token is still
+            // missing a moment later.
+            let (session, stopped) = (session.clone(), stopped.clone());
+            tokio::spawn(async move {
+                tokio::time::sleep(TOKEN_GRACE).await;
+                if hosts_its_run() && !token_present(&session, &format!("{COORDINATORS}{key}")).await {
+                    tracing::warn!("worker: the coordinator {key} is gone; stopping");
+                    let _ = stopped.send(Some(StopReason::CoordinatorLost));
+                }
+            });
         }
     });
     Ok(())
+}
+
+/// How long a coordinator's liveliness token may be missing before a
+/// worker counts it gone: a token can go and come back as links between
+/// peers are made and dropped (one coordinator leaving as the next links).
+const TOKEN_GRACE: Duration = Duration::from_secs(1);
+
+/// Whether a liveliness token `key` is declared now (asked of the peers).
+async fn token_present(session: &Session, key: &str) -> bool {
+    let Ok(replies) = session.liveliness().get(key).await else { return false };
+    matches!(tokio::time::timeout(Duration::from_secs(1), replies.recv_async()).await, Ok(Ok(_)))
 }
 
 /// Sends a control frame on `key`, waiting for room on the link rather
