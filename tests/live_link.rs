@@ -70,8 +70,7 @@ fn round_trip(format: &str, scans: usize) -> (String, serde_json::Value) {
     assert!(robot.status.success(), "robot: {report}{}", String::from_utf8_lossy(&robot.stderr));
     assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
     assert!(out.path().join("map.pgm").exists() && out.path().join("trajectory.tum").exists());
-    let metrics = std::fs::read_to_string(out.path().join("metrics.json")).unwrap();
-    (report, serde_json::from_str(&metrics).unwrap())
+    (report, metrics_in(out.path()))
 }
 
 fn number(report: &str, label: &str) -> usize {
@@ -139,8 +138,7 @@ fn python_round_trip(args: &[&str]) -> (serde_json::Value, serde_json::Value) {
     assert!(robot.status.success(), "client: {stdout}{}", String::from_utf8_lossy(&robot.stderr));
     assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
     let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(out.path());
     (report, metrics)
 }
 
@@ -245,20 +243,51 @@ fn poses_no_robot_listens_for_are_counted_as_unheard_not_sent() {
     assert_eq!(custom(&metrics, "publish", "transforms_sent"), 0, "{metrics}");
 }
 
+/// The `tls` inline table of the topology's side of the link, with
+/// `squall`'s certificate from the authority `ca` made in `certs`.
+fn link_tls(certs: &Path) -> String {
+    let file = |name: &str| certs.join(name).display().to_string();
+    format!(
+        "{{ root_ca = {:?}, certificate = {:?}, private_key = {:?} }}",
+        file("ca.pem"),
+        file("squall.pem"),
+        file("squall.key")
+    )
+}
+
+/// `squall robot` over TLS to `endpoint` as `name` (its certificate in
+/// `certs`), trusting the authority `ca`, playing `scans` scans.
+fn robot_over_tls(
+    certs: &Path,
+    endpoint: &str,
+    (name, ca): (&str, &str),
+    scans: &str,
+    connect_secs: &str,
+) -> std::process::Output {
+    let file = |name: String| certs.join(name).display().to_string();
+    output(
+        Command::new(env!("CARGO_BIN_EXE_squall"))
+            .args(["robot", "--log"])
+            .arg(aces())
+            .args(["--connect", endpoint, "--max-scans", scans, "--speed", "5"])
+            .args(["--connect-secs", connect_secs, "--tls-ca", &file(format!("{ca}.pem"))])
+            .args(["--tls-cert", &file(format!("{name}.pem")), "--tls-key", &file(format!("{name}.key"))]),
+    )
+}
+
+/// The metrics.json a run wrote into `dir`.
+fn metrics_in(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
     let certs = tempfile::tempdir().unwrap();
     common::certs::authority(certs.path(), "ca", &["squall", "robot"]);
     common::certs::authority(certs.path(), "rogue_ca", &["rogue"]);
-    let file = |name: &str| certs.path().join(name).display().to_string();
     let endpoint = format!("tls/127.0.0.1:{}", free_port());
     let listen = format!("[\"{endpoint}\"]");
-    let tls = format!(
-        "{{ root_ca = {:?}, certificate = {:?}, private_key = {:?} }}",
-        file("ca.pem"),
-        file("squall.pem"),
-        file("squall.key")
-    );
+    let tls = link_tls(certs.path());
     let out = tempfile::tempdir().unwrap();
     let sets = [
         format!("source.params.tls={tls}"),
@@ -267,20 +296,7 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
     ];
     let run = start_live(&listen, &sets, out.path());
     let robot = |name: &str, ca: &str, scans: &str, connect_secs: &str| {
-        output(
-            Command::new(env!("CARGO_BIN_EXE_squall"))
-                .args(["robot", "--log"])
-                .arg(aces())
-                .args(["--connect", &endpoint, "--max-scans", scans, "--speed", "5"])
-                .args(["--connect-secs", connect_secs])
-                .args(["--tls-ca", &file(&format!("{ca}.pem"))])
-                .args([
-                    "--tls-cert",
-                    &file(&format!("{name}.pem")),
-                    "--tls-key",
-                    &file(&format!("{name}.key")),
-                ]),
-        )
+        robot_over_tls(certs.path(), &endpoint, (name, ca), scans, connect_secs)
     };
     // A rogue that trusts the cluster's authority but holds another's
     // certificate gets no link. The topology outwaits it: its idle timer
@@ -297,8 +313,7 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
     assert!(member.status.success(), "{report}{}", String::from_utf8_lossy(&member.stderr));
     let ran = finish_within(run, HUNG, String::new);
     assert!(ran.status.success(), "run: {}", String::from_utf8_lossy(&ran.stderr));
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(out.path());
     // Only the member's scans reached the topology, and it got poses back.
     assert_eq!(custom(&metrics, "source", "scans_received"), 60, "{report}");
     assert!(number(&report, "poses received:") >= 54, "{report}");
@@ -308,15 +323,9 @@ fn over_tls_the_link_takes_a_member_and_keeps_a_rogue_out() {
 fn with_an_allowlist_the_link_takes_only_the_robots_it_names_and_counts_the_others() {
     let certs = tempfile::tempdir().unwrap();
     common::certs::authority(certs.path(), "ca", &["squall", "robot", "intruder"]);
-    let file = |name: &str| certs.path().join(name).display().to_string();
     let endpoint = format!("tls/127.0.0.1:{}", free_port());
     let listen = format!("[\"{endpoint}\"]");
-    let tls = format!(
-        "{{ root_ca = {:?}, certificate = {:?}, private_key = {:?} }}",
-        file("ca.pem"),
-        file("squall.pem"),
-        file("squall.key")
-    );
+    let tls = link_tls(certs.path());
     let out = tempfile::tempdir().unwrap();
     let sets = [
         format!("source.params.tls={tls}"),
@@ -327,19 +336,7 @@ fn with_an_allowlist_the_link_takes_only_the_robots_it_names_and_counts_the_othe
     ];
     let run = start_live(&listen, &sets, out.path());
     let robot = |name: &str, scans: &str, connect_secs: &str| {
-        output(
-            Command::new(env!("CARGO_BIN_EXE_squall"))
-                .args(["robot", "--log"])
-                .arg(aces())
-                .args(["--connect", &endpoint, "--max-scans", scans, "--speed", "5"])
-                .args(["--connect-secs", connect_secs, "--tls-ca", &file("ca.pem")])
-                .args([
-                    "--tls-cert",
-                    &file(&format!("{name}.pem")),
-                    "--tls-key",
-                    &file(&format!("{name}.key")),
-                ]),
-        )
+        robot_over_tls(certs.path(), &endpoint, (name, "ca"), scans, connect_secs)
     };
     // An intruder with a certificate from the same authority links, but
     // nothing it sends is taken and no topology answers it.
@@ -352,8 +349,7 @@ fn with_an_allowlist_the_link_takes_only_the_robots_it_names_and_counts_the_othe
     let run_log = String::from_utf8_lossy(&ran.stderr).to_string();
     assert!(ran.status.success(), "run: {run_log}");
     assert!(run_log.contains("refused peer \"intruder\""), "{run_log}");
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path().join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(out.path());
     assert_eq!(custom(&metrics, "source", "scans_received"), 40, "{report}");
     assert!(custom(&metrics, "source", "robots_refused") >= 1, "{}", metrics["components"]);
     assert!(number(&report, "poses received:") >= 36, "{report}");

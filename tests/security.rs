@@ -131,8 +131,7 @@ fn with_insecure_a_robot_and_its_live_link_talk_beyond_loopback_and_warn_at_star
     for component in ["spout \"source\"", "bolt \"publish\""] {
         assert!(run_log.contains(&format!("{component}: insecure: {endpoint}")), "{run_log}");
     }
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out_dir.path().join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(out_dir.path());
     let warnings: Vec<&str> =
         metrics["warnings"].as_array().unwrap().iter().filter_map(|w| w.as_str()).collect();
     let insecure: Vec<&&str> = warnings.iter().filter(|w| w.contains("insecure:")).collect();
@@ -168,8 +167,7 @@ fn with_insecure_a_worker_and_its_coordinator_talk_beyond_loopback_and_say_so() 
     assert!(stderr.contains("listening on tcp/10.9.9.9:7601"), "{stderr}");
     // The coordinator warned at start and in the run's metrics.
     assert!(stderr.contains("worker \"big\": insecure: tcp/10.9.9.9:7601"), "{stderr}");
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(dir.path());
     let warnings = metrics["warnings"].to_string();
     assert!(warnings.contains("worker \\\"big\\\": insecure: tcp/10.9.9.9:7601"), "{warnings}");
     let relay = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "relay").unwrap();
@@ -202,16 +200,25 @@ struct Worker(std::process::Child, String);
 
 impl Worker {
     fn start(args: &[&str], log: &Path) -> Worker {
-        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        Worker::start_at(&format!("tcp/127.0.0.1:{}", free_port()), args, log)
+    }
+
+    /// `squall worker` on `endpoint`.
+    fn start_at(endpoint: &str, args: &[&str], log: &Path) -> Worker {
         let child = Command::new(env!("CARGO_BIN_EXE_squall"))
-            .args(["worker", "--listen", &endpoint])
+            .args(["worker", "--listen", endpoint])
             .args(args)
             .stdout(std::process::Stdio::null())
             .stderr(std::fs::File::create(log).unwrap())
             .spawn()
             .unwrap();
-        Worker(child, endpoint)
+        Worker(child, endpoint.to_string())
     }
+}
+
+/// The metrics.json a run wrote into `dir`.
+fn metrics_in(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap()
 }
 
 impl Drop for Worker {
@@ -283,8 +290,7 @@ fn a_plan_reading_under_the_data_dir_runs_on_the_worker() {
         out_dir.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(&out_dir);
     let count = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "count").unwrap();
     assert!(count["received"].as_u64().unwrap() > 0, "{count}");
     drop(worker);
@@ -409,8 +415,7 @@ fn with_insecure_a_live_page_beyond_loopback_is_served_and_warned_of_in_the_metr
     let stderr = text(&done.stderr);
     assert!(done.status.success(), "{stderr}");
     assert!(stderr.contains("warning: insecure: --ui 10.9.9.9:0 serves the run beyond loopback"), "{stderr}");
-    let metrics: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics_in(dir.path());
     assert!(metrics["warnings"].to_string().contains("insecure: --ui 10.9.9.9:0"), "{}", metrics["warnings"]);
 }
 
@@ -479,20 +484,10 @@ fn a_worker_takes_plans_only_from_the_coordinators_it_allows_and_names_the_other
     let file = |name: &str| dir.path().join(name).display().to_string();
     let endpoint = format!("tls/127.0.0.1:{}", free_port());
     let log = dir.path().join("w1.log");
-    let mut worker = Command::new(env!("CARGO_BIN_EXE_squall"))
-        .args(["worker", "--listen", &endpoint, "--allow-coordinator", "coordinator"])
-        .args([
-            "--tls-ca",
-            &file("ca.pem"),
-            "--tls-cert",
-            &file("worker.pem"),
-            "--tls-key",
-            &file("worker.key"),
-        ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::fs::File::create(&log).unwrap())
-        .spawn()
-        .unwrap();
+    let (ca, cert, key) = (file("ca.pem"), file("worker.pem"), file("worker.key"));
+    let args =
+        ["--allow-coordinator", "coordinator", "--tls-ca", &ca, "--tls-cert", &cert, "--tls-key", &key];
+    let mut worker = Worker::start_at(&endpoint, &args, &log);
     let cluster = |name: &str| {
         let path = dir.path().join(format!("{name}.toml"));
         let text = format!(
@@ -517,9 +512,9 @@ fn a_worker_takes_plans_only_from_the_coordinators_it_allows_and_names_the_other
         "{stderr}"
     );
     // Interrupted, the worker says what it refused.
-    let stopped = Command::new("kill").args(["-INT", &worker.id().to_string()]).status().unwrap();
+    let stopped = Command::new("kill").args(["-INT", &worker.0.id().to_string()]).status().unwrap();
     assert!(stopped.success());
-    worker.wait().unwrap();
+    worker.0.wait().unwrap();
     let log = std::fs::read_to_string(&log).unwrap();
     assert!(
         log.contains("coordinator \"intruder\" is not on this worker's --allow-coordinator list"),

@@ -95,27 +95,39 @@ impl Confinement {
 
     /// Whether `path` may be read.
     pub fn check_read(&self, path: &Path) -> Result<(), ConfinementError> {
-        let named = || path.display().to_string();
-        match &self.read {
-            None => Err(ConfinementError::NoReads { path: named() }),
-            Some(root) if inside(path, root) => Ok(()),
-            Some(root) => {
-                Err(ConfinementError::ReadOutside { path: named(), root: root.display().to_string() })
-            }
-        }
+        within(
+            &self.read,
+            path,
+            |path| ConfinementError::NoReads { path },
+            |path, root| ConfinementError::ReadOutside { path, root },
+        )
     }
 
     /// Whether `path` (a file or a folder, existing or to be made) may
     /// be written.
     pub fn check_write(&self, path: &Path) -> Result<(), ConfinementError> {
-        let named = || path.display().to_string();
-        match &self.write {
-            None => Err(ConfinementError::NoWrites { path: named() }),
-            Some(root) if inside(path, root) => Ok(()),
-            Some(root) => {
-                Err(ConfinementError::WriteOutside { path: named(), root: root.display().to_string() })
-            }
-        }
+        within(
+            &self.write,
+            path,
+            |path| ConfinementError::NoWrites { path },
+            |path, root| ConfinementError::WriteOutside { path, root },
+        )
+    }
+}
+
+/// Whether `path` lies under `root`: else the error `none` (no root) or
+/// `outside` makes of the path (and the root) as named.
+fn within(
+    root: &Option<PathBuf>,
+    path: &Path,
+    none: fn(String) -> ConfinementError,
+    outside: fn(String, String) -> ConfinementError,
+) -> Result<(), ConfinementError> {
+    let named = path.display().to_string();
+    match root {
+        None => Err(none(named)),
+        Some(root) if inside(path, root) => Ok(()),
+        Some(root) => Err(outside(named, root.display().to_string())),
     }
 }
 

@@ -428,9 +428,11 @@ async fn token_present(session: &Session, key: &str) -> bool {
 /// full, which it is while tuples stream, and a lost `Finished`, `Totals`
 /// or `Go` would leave a run waiting forever.
 pub(crate) fn send_control(session: &Session, key: &str, control: Control) -> Result<(), HostError> {
-    put_waiting(session, key.to_string(), Frame::Control(control).encode())
-        .wait()
-        .map_err(|e| HostError::Zenoh(e.to_string()))
+    send_frame(session, key, Frame::Control(control))
+}
+
+fn send_frame(session: &Session, key: &str, frame: Frame) -> Result<(), HostError> {
+    put_waiting(session, key.to_string(), frame.encode()).wait().map_err(|e| HostError::Zenoh(e.to_string()))
 }
 
 /// Sends `control` on `key` as a coordinator: signed with `signer` (the
@@ -447,7 +449,7 @@ pub(crate) fn send_as_coordinator(
         Some(signer) => Frame::Signed(Box::new(signer.sign(key, &coordinator_id(session), control))),
         None => Frame::Control(control),
     };
-    put_waiting(session, key.to_string(), frame.encode()).wait().map_err(|e| HostError::Zenoh(e.to_string()))
+    send_frame(session, key, frame)
 }
 
 /// A put of `bytes` on `key` that waits for room on the link instead of

@@ -142,9 +142,7 @@ fn coordinate(
     let (traffic_stop, traffic_stopped) = mpsc::channel::<()>();
     if let Some((live, names)) = &watched {
         let (live, names, link) = (live.clone(), names.clone(), local.link.clone());
-        let tasks = (0..layout.components())
-            .map(|c| (0..layout.tasks(c)).filter(|&t| layout.host(c, t) == 0).count())
-            .sum();
+        let tasks = (0..layout.components()).map(|c| layout.tasks_on(c, 0)).sum();
         std::thread::spawn(move || {
             while let Err(mpsc::RecvTimeoutError::Timeout) =
                 traffic_stopped.recv_timeout(Duration::from_secs(1))

@@ -143,6 +143,18 @@ impl Layout {
         self.hosts[c].len()
     }
 
+    /// How many tasks of component c are on `host` now.
+    pub(crate) fn tasks_on(&self, c: usize, host: u16) -> usize {
+        (0..self.tasks(c)).filter(|&t| self.host(c, t) == host).count()
+    }
+
+    /// The first task (component, task) on `host` now, if any.
+    pub(crate) fn first_task_on(&self, host: u16) -> Option<(usize, usize)> {
+        (0..self.components())
+            .flat_map(|c| (0..self.tasks(c)).map(move |t| (c, t)))
+            .find(|&(c, t)| self.host(c, t) == host)
+    }
+
     /// Components.
     pub(crate) fn components(&self) -> usize {
         self.hosts.len()

@@ -96,14 +96,14 @@ impl WorkerLimits {
     fn refusal(&self, topology: &Topology, layout: &Layout, host: u16) -> Option<String> {
         let (mut tasks, mut queued) = (0usize, 0usize);
         for (c, component) in topology.components.iter().enumerate() {
-            let here = (0..layout.tasks(c)).filter(|&t| layout.host(c, t) == host).count();
+            let here = layout.tasks_on(c, host);
             let spec = &component.spec;
             let peers = if component.declared.peer_type().is_some() { spec.peer_queue } else { 0 };
             let per_task = spec.inputs.iter().map(|i| i.queue).sum::<usize>() + peers;
             tasks += here;
             queued = queued.saturating_add(here.saturating_mul(per_task));
         }
-        let hosted = |c: usize| (0..layout.tasks(c)).any(|t| layout.host(c, t) == host);
+        let hosted = |c: usize| layout.tasks_on(c, host) > 0;
         if let Some(exposed) = topology.exposures(hosted).first().filter(|_| !self.insecure) {
             return Some(format!(
                 "{exposed}; this worker hosts unauthenticated links only if started with --insecure"
@@ -160,16 +160,9 @@ pub fn host_run(
     let report_key = plan.report_key();
     let (events_tx, events) = mpsc::channel();
     if let Err(e) = host.start(&topology, options, &events_tx) {
-        // Fail the run in the coordinator's eyes too (in a task of this
-        // host's), rather than leave it waiting for tasks that never start.
-        let layout = &host.layout;
-        let here = (0..layout.components())
-            .flat_map(|c| (0..layout.tasks(c)).map(move |t| (c, t)))
-            .find(|&(c, t)| layout.host(c, t) == plan.host);
-        if let Some((c, t)) = here {
-            let failed = TaskEvent::Failed(e.to_string());
-            put(session, &report_key, Control::Event { component: c as u32, task: t as u32, event: failed })?;
-        }
+        // Fail the run in the coordinator's eyes too, rather than leave it
+        // waiting for tasks that never start.
+        fail_here(session, &report_key, &host.layout, plan.host, e.to_string())?;
         return Err(e);
     }
     let mut run = Following {
@@ -212,7 +205,7 @@ fn prepare(
         // path a component hosted here reads or writes is inside the
         // worker's folders. (What components read while they validate
         // was checked as they read it.)
-        let hosted = |c: usize| (0..layout.tasks(c)).any(|t| layout.host(c, t) == plan.host);
+        let hosted = |c: usize| layout.tasks_on(c, plan.host) > 0;
         let errors = topology.confinement_errors(policy, hosted);
         if !errors.is_empty() {
             return Err(HostError::Confined(SpecErrors(errors)));
@@ -284,6 +277,25 @@ impl ControlInbox<'_> {
                 _ => {}
             }
         }
+    }
+}
+
+/// Fails the run through a task of `host` (the first it has), reporting
+/// `message` on `report_key`: the coordinator then aborts the run, as for
+/// any failed task.
+fn fail_here(
+    session: &Session,
+    report_key: &str,
+    layout: &Layout,
+    host: u16,
+    message: String,
+) -> Result<(), HostError> {
+    match layout.first_task_on(host) {
+        Some((c, t)) => {
+            let event = TaskEvent::Failed(message);
+            put(session, report_key, Control::Event { component: c as u32, task: t as u32, event })
+        }
+        None => Ok(()),
     }
 }
 
@@ -387,19 +399,13 @@ impl Following<'_> {
     fn fail_for_limit(&mut self, why: &str) -> Result<(), HostError> {
         self.over_limit = true;
         tracing::error!("worker: {why}");
-        let layout = &self.host.layout;
-        let here = (0..layout.components())
-            .flat_map(|c| (0..layout.tasks(c)).map(move |t| (c, t)))
-            .find(|&(c, t)| layout.host(c, t) == self.plan.host);
-        if let Some((c, t)) = here {
-            let failed = TaskEvent::Failed(format!("worker limit: {why}"));
-            put(
-                self.session,
-                &self.report_key,
-                Control::Event { component: c as u32, task: t as u32, event: failed },
-            )?;
-        }
-        Ok(())
+        fail_here(
+            self.session,
+            &self.report_key,
+            &self.host.layout,
+            self.plan.host,
+            format!("worker limit: {why}"),
+        )
     }
 
     /// This host's tasks and traffic now.
