@@ -207,11 +207,20 @@ fn a_bolt_that_hangs_is_named_by_the_stall_watchdog() {
     // The relay never returns from its 50th tuple; the watchdog gives it
     // one second.
     let (stderr, metrics) = failed_probe_run("hang", &["topology.stall_secs=1", "relay.params.hang_at=50"]);
-    let error = "bolt \"relay\" task 0 stalled: no progress for 1.0 s inside one execute or tick";
+    // The component, the limit and the cause are exact; how long the
+    // watchdog saw it stuck is at least the limit (it looks a little
+    // later on a loaded machine).
+    let error = metrics["error"].as_str().unwrap();
+    let stuck = error
+        .strip_prefix("bolt \"relay\" task 0 stalled: no progress for ")
+        .and_then(|rest| rest.split_once(" s inside one execute or tick"))
+        .unwrap_or_else(|| panic!("{error}"));
+    let secs: f64 = stuck.0.parse().unwrap_or_else(|_| panic!("{error}"));
+    assert!(secs >= 1.0, "{error}");
+    assert!(stuck.1.ends_with("the limit is [topology] stall_secs = 1"), "{error}");
     assert!(stderr.contains(&format!("error: the run failed: {error}")), "{stderr}");
     assert!(stderr.contains("ERROR") && stderr.contains("component=relay task=0"), "logged: {stderr}");
     assert_eq!(metrics["status"], "failed");
-    assert!(metrics["error"].as_str().unwrap().starts_with(error), "{}", metrics["error"]);
     // Its thread never returned: its counters are unknown, and say so.
     let relay = metrics["components"].as_array().unwrap().iter().find(|c| c["name"] == "relay").unwrap();
     assert_eq!(relay["per_task"][0]["lost"], true, "{relay}");
@@ -731,14 +740,77 @@ fn slam_without_scans_fails_saying_why_instead_of_succeeding_empty() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The names in `dir`, sorted.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn a_bag_in_a_read_only_folder_is_read_by_a_user_who_is_not_root_and_nothing_is_written_beside_it() {
+    use std::os::unix::fs::PermissionsExt;
+    // The TurtleBot 4 bag: sqlite3 in WAL journal mode, as rosbag2 records.
+    let original = PathBuf::from(shared_data("real/olin_mac/bag"));
+    let root = tempfile::tempdir().unwrap();
+    let mode = |path: &Path, mode: u32| {
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap()
+    };
+    mode(root.path(), 0o755);
+    let bag = root.path().join("bag");
+    std::fs::create_dir(&bag).unwrap();
+    for name in names_in(&original) {
+        std::fs::copy(original.join(&name), bag.join(&name)).unwrap();
+        mode(&bag.join(&name), 0o444);
+    }
+    mode(&bag, 0o555);
+    let before = names_in(&bag);
+    let out = root.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    mode(&out, 0o777);
+    // As root the folder's modes bind nobody: the run then drops to the
+    // unprivileged user (setpriv, from util-linux), with its own copy of
+    // the binary where that user can reach it.
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let root_user = unsafe { libc::geteuid() } == 0;
+    let mut command = if root_user {
+        let binary = root.path().join("squall");
+        std::fs::copy(env!("CARGO_BIN_EXE_squall"), &binary).unwrap();
+        mode(&binary, 0o755);
+        let mut c = Command::new("setpriv");
+        c.args(["--reuid=65534", "--regid=65534", "--clear-groups"]).arg(binary);
+        c
+    } else {
+        Command::new(env!("CARGO_BIN_EXE_squall"))
+    };
+    let run = command
+        .arg("slam")
+        .arg("--log")
+        .arg(&bag)
+        .args(["--max-scans", "40", "--particles", "10", "--quiet", "--out"])
+        .arg(&out)
+        .current_dir(root.path())
+        .output()
+        .expect("setpriv runs (util-linux)");
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let poses = std::fs::read_to_string(out.join("trajectory.tum")).unwrap();
+    assert_eq!(poses.lines().filter(|l| !l.starts_with('#')).count(), 40, "{poses}");
+    assert!(run.stdout.is_empty(), "--quiet prints no summary: {}", text(&run.stdout));
+    assert_eq!(names_in(&bag), before, "nothing is written beside the bag (no -shm, no -wal)");
+    mode(&bag, 0o755);
+}
+
 /// `aces` converted to rosbag2's sqlite3 storage by an independent tool,
-/// the `rosbags` Python package (`.ci/run` installs it, pinned), into
+/// the `rosbags` Python package (`./test.sh` installs it, pinned), into
 /// `dir/aces-db3`.
 fn aces_as_db3(dir: &Path) -> PathBuf {
     let check = Command::new("rosbags-convert").arg("--help").output();
     assert!(
         check.as_ref().is_ok_and(|o| o.status.success()),
-        "this test needs rosbags-convert from the rosbags Python package (pip install rosbags==0.11.9)"
+        "this test needs rosbags-convert from the rosbags Python package (./test.sh installs it: tests/clients/requirements.txt)"
     );
     let db3 = dir.join("aces-db3");
     let _ = std::fs::remove_dir_all(&db3);
@@ -753,6 +825,10 @@ fn aces_as_db3(dir: &Path) -> PathBuf {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "client-tests"),
+    ignore = "needs rosbags-convert (feature client-tests; ./test.sh runs it)"
+)]
 fn a_db3_bag_gives_byte_identical_slam_to_the_mcap_and_ros_1_bags_are_refused_before_the_run() {
     let dir = out_dir("db3");
     std::fs::create_dir_all(&dir).unwrap();

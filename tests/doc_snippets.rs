@@ -36,9 +36,9 @@ use std::time::{Duration, Instant};
 
 /// The README's main job, which must stay exactly this and runnable.
 const MAIN_JOB: &str = "cargo run --release -- slam --out out/slam";
-/// The README's test command (what `.ci/run` runs): the README must show
-/// it, and this test must not run it.
-const TEST_COMMAND: &str = "cargo test --workspace --release --all-features";
+/// The README's test command, which `.ci/run` runs and nothing else: the
+/// README must show it, and this test must not run it.
+const TEST_COMMAND: &str = "./test.sh";
 /// Fewer runnable blocks than this means the extraction is broken.
 const MIN_BLOCKS: usize = 25;
 /// A block still running after this is killed and fails the test.
@@ -337,6 +337,18 @@ fn the_readme_keeps_its_main_job_runnable_and_its_test_command() {
     assert!(
         !runnable_line(TEST_COMMAND),
         "README.md marks `{TEST_COMMAND}` runnable: this test would run it"
+    );
+    let ci = std::fs::read_to_string(repo().join(".ci/run")).unwrap();
+    let commands: Vec<&str> =
+        ci.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')).collect();
+    assert_eq!(
+        commands.last(),
+        Some(&format!("exec {TEST_COMMAND}").as_str()),
+        ".ci/run must end by running the README's test command: {commands:?}"
+    );
+    assert!(
+        !ci.contains("cargo "),
+        ".ci/run runs cargo itself: what it runs belongs in {TEST_COMMAND}, for a newcomer to run too"
     );
 }
 

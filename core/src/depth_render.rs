@@ -169,10 +169,10 @@ impl DepthCamera {
         if d.2 < 0.0 {
             take(-h / d.2, d.2.abs() / norm);
         }
-        if let Some(c) = self.ceiling {
-            if d.2 > 0.0 {
-                take((c - h) / d.2, d.2 / norm);
-            }
+        if let Some(c) = self.ceiling
+            && d.2 > 0.0
+        {
+            take((c - h) / d.2, d.2 / norm);
         }
         // A vertical face from `a` to `c`, floor to `top`.
         let mut face = |a: (Real, Real), c: (Real, Real), top: Real| {

@@ -75,14 +75,14 @@ impl Trajectory {
     pub fn parse_tum(path: &str, text: &str) -> Result<Self, TrajectoryError> {
         let mut t = Trajectory::default();
         for (line, v) in textfile::numeric_lines(path, text, 8, "t x y z qx qy qz qw", false)? {
-            if let Some(&last) = t.stamps.last() {
-                if v[0] < last {
-                    return Err(TextFileError::Bad {
-                        path: path.to_string(),
-                        line,
-                        message: format!("stamps must not go back in time ({} after {last})", v[0]),
-                    });
-                }
+            if let Some(&last) = t.stamps.last()
+                && v[0] < last
+            {
+                return Err(TextFileError::Bad {
+                    path: path.to_string(),
+                    line,
+                    message: format!("stamps must not go back in time ({} after {last})", v[0]),
+                });
             }
             let (qx, qy, qz, qw) = (v[4], v[5], v[6], v[7]);
             let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));

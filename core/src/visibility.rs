@@ -79,10 +79,11 @@ pub fn trim_occlusion(x: (Real, Real), l1: Visible, l2: &Visible) -> Vec<Visible
     }
     // Split the overlap where the two walls cross, if they do.
     let mut cuts = vec![lo, hi];
-    if let Some(phi) = crossing(l1.a, l1.b, l2.a, l2.b).map(|p| normalize_angle(bearing(x, p) - alpha)) {
-        if phi > lo && phi < hi {
-            cuts.insert(1, phi);
-        }
+    if let Some(phi) = crossing(l1.a, l1.b, l2.a, l2.b).map(|p| normalize_angle(bearing(x, p) - alpha))
+        && phi > lo
+        && phi < hi
+    {
+        cuts.insert(1, phi);
     }
     // The occluded part of [0, width]: sub-intervals where l2 is nearer.
     let mut hidden: Option<(Real, Real)> = None;

@@ -70,6 +70,10 @@ pub(super) struct LocalizeArgs {
     /// Output folder: trajectory.tum, ground_truth.tum, metrics.json.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Print neither the summary table nor the score (metrics.json has
+    /// both).
+    #[arg(long)]
+    quiet: bool,
     #[command(flatten)]
     watch: super::watch::WatchArgs,
 }
@@ -313,10 +317,10 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
     }
     let spec =
         Topology::from_text("localize.toml (built in)", &text, &overrides, &squall::builtin::registry());
-    let scorer = |dir: &Path| score(dir, &route);
+    let scorer = |dir: &Path| score(dir, &route, args.quiet);
     match report_invalid(spec) {
         Ok(topology) => {
-            run::run_scored(&topology, Some(args.out.clone()), false, None, &args.watch, Some(&scorer))
+            run::run_scored(&topology, Some(args.out.clone()), args.quiet, None, &args.watch, Some(&scorer))
         }
         Err(code) => code,
     }
@@ -329,22 +333,26 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
 /// worse than it (`worst_over_odometry_m`: the largest of the estimate's
 /// error less the odometry's, over the poses); with a kidnapping, also
 /// how long the robot was lost after it (`kidnap`).
-fn score(dir: &Path, route: &Route) -> Result<(&'static str, serde_json::Value), String> {
+fn score(dir: &Path, route: &Route, quiet: bool) -> Result<(&'static str, serde_json::Value), String> {
     let read = |name: &str| Trajectory::read_tum(&dir.join(name)).map_err(|e| e.to_string());
     let (estimate, truth) = (read("trajectory.tum")?, read("ground_truth.tum")?);
     let score = map_frame::score(&estimate, &truth)
         .ok_or("no pose of trajectory.tum shares a stamp with ground_truth.tum")?;
-    print_map_frame(&score, false);
+    if !quiet {
+        print_map_frame(&score, false);
+    }
     let mut value = serde_json::to_value(score).map_err(|e| e.to_string())?;
     if let (Some(odometry), Some(worst)) = (
         map_frame::score(&route.odometry, &truth),
         map_frame::worst_excess(&estimate, &route.odometry, &truth),
     ) {
-        outln!(
-            "  raw odometry: {:.4} m mean, {:.4} m max; the estimate at most {worst:.4} m worse than it",
-            odometry.map_mean_m,
-            odometry.map_max_m
-        );
+        if !quiet {
+            outln!(
+                "  raw odometry: {:.4} m mean, {:.4} m max; the estimate at most {worst:.4} m worse than it",
+                odometry.map_mean_m,
+                odometry.map_max_m
+            );
+        }
         value["odometry"] =
             serde_json::json!({ "map_mean_m": odometry.map_mean_m, "map_max_m": odometry.map_max_m });
         value["worst_over_odometry_m"] = serde_json::json!(worst);
@@ -352,6 +360,7 @@ fn score(dir: &Path, route: &Route) -> Result<(&'static str, serde_json::Value),
     if let Some(c) = route.carry {
         let recovered = map_frame::recovered_after(&estimate, &truth, c.stamp);
         match recovered {
+            _ if quiet => {}
             Some(t) => outln!(
                 "  kidnapped at {:.1} s, carried {:.1} m: found again {t:.2} s later",
                 c.stamp,

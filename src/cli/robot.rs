@@ -41,7 +41,8 @@ pub(super) struct RobotArgs {
     /// Play only the first N scans.
     #[arg(long, value_name = "N")]
     max_scans: Option<usize>,
-    /// How long to wait for the last poses after the last scan, seconds.
+    /// How long to wait for the last poses after the last scan, seconds, at
+    /// most: the wait ends when the last scan's pose arrives.
     #[arg(long, default_value_t = 5.0)]
     wait_secs: f64,
     /// How long to wait for the link to come up, seconds.
@@ -177,10 +178,12 @@ async fn play(
             Format::Ros2 => messages::read_pose_stamped(&bytes).map(|(h, _)| h.stamp).ok(),
             Format::Squall => postcard::from_bytes::<PoseStamped>(&bytes).map(|p| p.stamp).ok(),
         };
-        match stamp.and_then(|s| sent.get(&stamp_key(s))) {
+        let key = stamp.map(stamp_key);
+        match key.and_then(|k| sent.get(&k)) {
             Some(at) => latencies.push(at.elapsed().as_secs_f64() * 1e3),
             None => malformed += 1,
         }
+        key
     };
     let started = Instant::now();
     let first = scans.first().map_or(0.0, |s| s.stamp);
@@ -192,7 +195,7 @@ async fn play(
                 break;
             }
             if let Ok(Ok(sample)) = tokio::time::timeout(wait, poses.recv_async()).await {
-                take(sample, &sent, &mut latencies);
+                let _ = take(sample, &sent, &mut latencies);
             }
         }
         sent.insert(stamp_key(scan.stamp), Instant::now());
@@ -205,11 +208,19 @@ async fn play(
             _ => scan_publisher.put(postcard::to_stdvec(scan)?).await?,
         }
     }
+    // A live topology may drop readings while it is busy (and counts
+    // them) but never the newest, and poses come in order: once the last
+    // scan's pose is here, every pose that will come has.
+    let last = scans.last().map(|s| stamp_key(s.stamp));
     let end = Instant::now() + Duration::from_secs_f64(args.wait_secs);
     while latencies.len() < scans.len() {
         let wait = end.saturating_duration_since(Instant::now());
         match tokio::time::timeout(wait, poses.recv_async()).await {
-            Ok(Ok(sample)) => take(sample, &sent, &mut latencies),
+            Ok(Ok(sample)) => {
+                if take(sample, &sent, &mut latencies) == last {
+                    break;
+                }
+            }
             _ => break,
         }
     }

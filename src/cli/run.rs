@@ -124,11 +124,11 @@ pub(super) fn run_scored(
         (None, true) => Status::Stopped,
         (None, false) => Status::Completed,
     };
-    if let Some(dir) = &out {
-        if let Err(e) = write_metrics(dir, &report, score, &status) {
-            eprintln!("error: cannot write {}: {e}", dir.join("metrics.json").display());
-            code = ExitCode::from(EXIT_FAILED);
-        }
+    if let Some(dir) = &out
+        && let Err(e) = write_metrics(dir, &report, score, &status)
+    {
+        eprintln!("error: cannot write {}: {e}", dir.join("metrics.json").display());
+        code = ExitCode::from(EXIT_FAILED);
     }
     if let Some(failure) = failure {
         eprintln!("error: the run failed: {failure}");

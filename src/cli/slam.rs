@@ -41,6 +41,9 @@ pub(super) struct SlamArgs {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub(super) out: PathBuf,
+    /// Do not print the summary table.
+    #[arg(long)]
+    pub(super) quiet: bool,
     /// Run on the workers of this cluster file (cluster mode).
     #[arg(long, value_name = "CLUSTER.toml")]
     pub(super) cluster: Option<PathBuf>,
@@ -144,7 +147,7 @@ pub(super) fn slam(args: &SlamArgs) -> ExitCode {
     }
     match topology(args) {
         Ok(topology) => {
-            run::run(&topology, Some(args.out.clone()), false, args.cluster.as_deref(), &args.watch)
+            run::run(&topology, Some(args.out.clone()), args.quiet, args.cluster.as_deref(), &args.watch)
         }
         Err(code) => code,
     }

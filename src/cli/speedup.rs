@@ -188,6 +188,7 @@ fn run_one(
         topology: None,
         overrides: Vec::new(),
         out: dir.to_path_buf(),
+        quiet: true,
         watch: Default::default(),
     };
     let topology =

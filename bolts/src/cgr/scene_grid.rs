@@ -150,12 +150,11 @@ impl SceneGrid {
     ) -> crate::Result<(Self, bool)> {
         let path = Self::cache_path(dir, map, cell, range);
         if let Ok(bytes) = std::fs::read(&path) {
-            if let Ok(grid) = postcard::from_bytes::<SceneGrid>(&bytes) {
-                if grid.key == Self::key(map, cell, range)
-                    && grid.offsets.len() == grid.width * grid.height + 1
-                {
-                    return Ok((grid, false));
-                }
+            if let Ok(grid) = postcard::from_bytes::<SceneGrid>(&bytes)
+                && grid.key == Self::key(map, cell, range)
+                && grid.offsets.len() == grid.width * grid.height + 1
+            {
+                return Ok((grid, false));
             }
             tracing::warn!("{}: not a usable scene cache; rebuilding it", path.display());
         }

@@ -38,7 +38,7 @@ impl MapHistory {
     /// recent snapshot to old and takes a new one.
     pub fn record(&mut self, map: &TiledGrid, age: usize) {
         self.updates += 1;
-        if age > 0 && self.updates % age as u64 == 0 {
+        if age > 0 && self.updates.is_multiple_of(age as u64) {
             self.old = self.recent.take();
             self.recent = Some(map.clone());
         }

@@ -8,12 +8,16 @@
 //! shows (30 a second), so that a log replayed a hundred times faster
 //! than real time does not cost the robot's computer more to send than
 //! to process. The `sink.foxglove` bolt ([`FoxgloveSink`]) publishes the
-//! streams it subscribes to into both. With neither attached, publishing
+//! streams it subscribes to into both. A viewer subscribing to a live
+//! channel gets its latest message at once (latched, as ROS 2 latches
+//! `/map`), so that one who joins late, or after the run while the views
+//! linger, sees the map, the robot and its scan. With neither attached, publishing
 //! costs little more than the conversion: the SDK drops messages no sink
 //! takes. A live client that cannot keep up loses its oldest messages in
 //! the SDK's per-client queue, never holding up the topology.
 
 pub mod convert;
+mod latch;
 mod sink;
 
 use std::path::{Path, PathBuf};
@@ -58,13 +62,16 @@ pub fn serve(host: &str, port: u16) -> Result<WebSocketServerHandle, String> {
             .build()
     });
     let runtime = runtime.as_ref().map_err(|e| format!("cannot start the view's thread: {e}"))?;
-    WebSocketServer::new()
+    let server = WebSocketServer::new()
         .name("squall")
         .bind(host, port)
         .context(live_context())
+        .listener(Arc::new(latch::Replay))
         .tokio_runtime(runtime.handle())
         .start_blocking()
-        .map_err(|e| e.to_string())
+        .map_err(|e| e.to_string())?;
+    latch::enable();
+    Ok(server)
 }
 
 /// Records every channel into an MCAP file, written beside it under a

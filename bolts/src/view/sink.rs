@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use foxglove::messages::{
     FrameTransform, FrameTransforms, Grid, LaserScan, PointCloud, PoseInFrame, PosesInFrame, SceneUpdate,
 };
-use foxglove::{Channel, Encode};
+use foxglove::{Channel, Encode, RawChannel, ToUnixNanos};
 use serde::Deserialize;
 use squall_core::geometry::{Pose2, Real};
 use squall_core::linemap::LineMap;
@@ -36,7 +36,7 @@ use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::{Bolt, BoxError, Declarer, Emitter, ParamError, Params, Source, TaskContext, Tuple};
 
 use super::convert::{self, BASE_LINK, LASER, MAP, ODOM};
-use super::{context, live_context};
+use super::{context, latch, live_context};
 use crate::cgr::observation::Observation2d;
 use crate::pf::ParticleSet;
 use crate::pf::modes::Hypotheses;
@@ -94,7 +94,8 @@ const LIVE_PERIOD: Duration = Duration::from_millis(33);
 /// most one a [`LIVE_PERIOD`] into the live one.
 struct Outlet<T: Encode> {
     recorded: Channel<T>,
-    live: Channel<T>,
+    /// Sent through [`latch::send`], which encodes `T` itself.
+    live: Arc<RawChannel>,
     live_at: Option<Instant>,
 }
 
@@ -114,11 +115,13 @@ impl<T: Encode> Default for Topics<T> {
 impl<T: Encode> Topics<T> {
     fn outlet(&mut self, topic: &str) -> &mut Outlet<T> {
         if !self.outlets.contains_key(topic) {
-            let outlet = Outlet {
-                recorded: context().channel_builder(topic).build(),
-                live: live_context().channel_builder(topic).build(),
-                live_at: None,
-            };
+            let live = live_context()
+                .channel_builder(topic)
+                .message_encoding(T::get_message_encoding())
+                .schema(T::get_schema())
+                .build_raw()
+                .expect("a message encoding is given");
+            let outlet = Outlet { recorded: context().channel_builder(topic).build(), live, live_at: None };
             self.outlets.insert(topic.to_string(), outlet);
         }
         self.outlets.get_mut(topic).expect("inserted above")
@@ -128,17 +131,19 @@ impl<T: Encode> Topics<T> {
     fn log(&mut self, topic: &str, msg: &T, stamp: f64) {
         self.outlet(topic).recorded.log_with_time(msg, convert::timestamp(stamp));
         if let Some(live) = self.live_due(topic) {
-            live.log_with_time(msg, convert::timestamp(stamp));
+            latch::send(live, msg, convert::timestamp(stamp).to_unix_nanos());
         }
     }
 
-    /// The live channel of `topic` if anyone watches it and a message is
-    /// due (counted as sent); else `None` (counted as held back when
-    /// someone watches).
-    fn live_due(&mut self, topic: &str) -> Option<&Channel<T>> {
+    /// The live channel of `topic` if a message is due there (counted as
+    /// sent): anyone watches it, or a live server runs (to latch it for
+    /// viewers to come). Else `None`, counted as held back when someone
+    /// watches.
+    fn live_due(&mut self, topic: &str) -> Option<&Arc<RawChannel>> {
         let mut held_back = 0;
         let o = self.outlets.get_mut(topic)?;
-        let due = o.live.has_sinks() && {
+        let watched = o.live.has_sinks();
+        let due = (watched || latch::enabled()) && {
             let now = Instant::now();
             let due = o.live_at.is_none_or(|at| now.duration_since(at) >= LIVE_PERIOD);
             if due {
@@ -148,7 +153,9 @@ impl<T: Encode> Topics<T> {
             }
             due
         };
-        self.held_back += held_back;
+        if watched {
+            self.held_back += held_back;
+        }
         let o = self.outlets.get(topic)?;
         due.then_some(&o.live)
     }
@@ -292,7 +299,8 @@ impl FoxgloveSink {
     }
 
     /// Records `transforms` on `/tf`; live viewers get, when one is due,
-    /// the latest transform of every frame since the last they got.
+    /// the latest transform of every frame (so the latched `/tf` places
+    /// every frame).
     fn transforms(&mut self, transforms: Vec<FrameTransform>, stamp: f64) {
         for t in &transforms {
             self.latest_tf.insert(t.child_frame_id.clone(), t.clone());
@@ -300,9 +308,8 @@ impl FoxgloveSink {
         let msg = FrameTransforms { transforms };
         self.tf.outlet("/tf").recorded.log_with_time(&msg, convert::timestamp(stamp));
         if let Some(live) = self.tf.live_due("/tf") {
-            let latest =
-                FrameTransforms { transforms: std::mem::take(&mut self.latest_tf).into_values().collect() };
-            live.log_with_time(&latest, convert::timestamp(stamp));
+            let latest = FrameTransforms { transforms: self.latest_tf.values().cloned().collect() };
+            latch::send(live, &latest, convert::timestamp(stamp).to_unix_nanos());
         }
     }
 

@@ -311,14 +311,55 @@ fn missing_topic(path: &Path, topics: &Topics, seen: &[(String, String)]) -> Opt
     )
 }
 
-/// Opens a `.db3` read-only.
+/// Opens a `.db3` so that nothing is written beside it: read-only and
+/// immutable (SQLite's `immutable=1`), so that SQLite neither takes a
+/// lock nor makes the `-shm` and `-wal` files a database in WAL journal
+/// mode (as rosbag2 records them) otherwise gets, which a bag in a
+/// read-only folder cannot have and a user's bag should never grow.
+/// Immutable mode does not read a write-ahead log: a bag whose recorder
+/// died leaves its last messages in a non-empty `-wal` file, and reading
+/// the database without them would lose them silently, so such a bag is
+/// refused with what to do.
 fn open_db3(file: &Path) -> Result<rusqlite::Connection, BagError> {
     use rusqlite::OpenFlags;
+    let mut wal = file.as_os_str().to_owned();
+    wal.push("-wal");
+    if let Ok(m) = std::fs::metadata(&wal)
+        && m.len() > 0
+    {
+        return Err(BagError::Sqlite {
+            path: file.to_path_buf(),
+            message: format!(
+                "its write-ahead log {} holds {} bytes not yet in the database (the recording was \
+                 not closed); in a writable copy of the bag folder, merge it with `sqlite3 FILE.db3 \
+                 \"PRAGMA wal_checkpoint(TRUNCATE)\"` and read the copy",
+                Path::new(&wal).display(),
+                m.len()
+            ),
+        });
+    }
     rusqlite::Connection::open_with_flags(
-        file,
-        OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
+        immutable_uri(file),
+        OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX | OpenFlags::SQLITE_OPEN_URI,
     )
     .map_err(|e| sqlite_error(file, e))
+}
+
+/// `file` as an SQLite URI that opens it read-only and immutable, every
+/// byte outside the URI's unreserved set percent-encoded (a path may hold
+/// `?`, `#` or `%`).
+fn immutable_uri(file: &Path) -> String {
+    use std::fmt::Write;
+    let mut uri = String::from("file:");
+    for &b in file.as_os_str().as_encoded_bytes() {
+        if b.is_ascii_alphanumeric() || b"/-._~".contains(&b) {
+            uri.push(b as char);
+        } else {
+            let _ = write!(uri, "%{b:02X}");
+        }
+    }
+    uri.push_str("?mode=ro&immutable=1");
+    uri
 }
 
 fn sqlite_error(file: &Path, e: rusqlite::Error) -> BagError {
@@ -696,6 +737,39 @@ mod tests {
         rusqlite::Connection::open(&not_a_bag).unwrap().execute("CREATE TABLE t(x)", []).unwrap();
         let e = check_bag(&not_a_bag, &Topics::default()).unwrap_err().to_string();
         assert!(e.contains("not a readable rosbag2 sqlite3 database") && e.contains("topics"), "{e}");
+    }
+
+    #[test]
+    fn a_db3_is_read_without_writing_beside_it_and_an_unmerged_log_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("odd name?#%.db3");
+        let beside = || {
+            let mut names: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().into_string().unwrap())
+                .collect();
+            names.sort();
+            names
+        };
+        // rosbag2 records in WAL journal mode; while the recorder holds the
+        // database, its last rows are only in the write-ahead log.
+        let recorder = rusqlite::Connection::open(&file).unwrap();
+        let mode: String = recorder.query_row("PRAGMA journal_mode=WAL", [], |r| r.get(0)).unwrap();
+        assert_eq!(mode, "wal");
+        recorder.execute_batch("CREATE TABLE topics(id, name, type, serialization_format)").unwrap();
+        recorder
+            .execute("INSERT INTO topics VALUES (1, '/scan', 'sensor_msgs/msg/LaserScan', 'cdr')", [])
+            .unwrap();
+        let e = open_db3(&file).unwrap_err().to_string();
+        assert!(e.contains("write-ahead log") && e.contains("not yet in the database"), "{e}");
+        drop(recorder);
+        // Closed: the log is merged and gone; reading leaves nothing beside.
+        let before = beside();
+        assert_eq!(before, vec!["odd name?#%.db3".to_string()]);
+        let db = open_db3(&file).unwrap();
+        assert_eq!(db3_channels(&db, &file).unwrap()[&1].topic, "/scan");
+        drop(db);
+        assert_eq!(beside(), before);
     }
 
     #[test]

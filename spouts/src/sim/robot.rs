@@ -561,7 +561,7 @@ impl Iterator for Simulation {
                 self.kidnap(k);
             }
             self.advance();
-            if self.step % self.steps_per_scan == 0 {
+            if self.step.is_multiple_of(self.steps_per_scan) {
                 let scan = self.scan();
                 let odom = Odometry {
                     stamp: scan.stamp,

@@ -289,6 +289,7 @@ fn validate(args: &StudyArgs, simulated: &[worlds::World]) -> Result<Vec<Log>, S
             topology: None,
             overrides: overrides.map_err(|e: squall_topology::OverrideError| e.to_string())?,
             out: args.out.clone(),
+            quiet: true,
             cluster: None,
             watch: Default::default(),
         };

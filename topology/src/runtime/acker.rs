@@ -148,10 +148,11 @@ impl Anchor {
     /// A new anchor for a delivered child tuple.
     pub(crate) fn child(&self) -> Anchor {
         let mut s = self.tracker.lock();
-        if let Some(root) = s.roots.get_mut(&self.seq) {
-            if root.attempt == self.attempt && root.outstanding > 0 {
-                root.outstanding += 1;
-            }
+        if let Some(root) = s.roots.get_mut(&self.seq)
+            && root.attempt == self.attempt
+            && root.outstanding > 0
+        {
+            root.outstanding += 1;
         }
         Anchor { tracker: self.tracker.clone(), seq: self.seq, attempt: self.attempt }
     }

@@ -288,7 +288,7 @@ pub(crate) async fn run_bolt<B: Bolt>(bolt: &mut B, t: &mut BoltTask) -> Result<
         let mut slow = false;
         let mut timed = false;
         while let Some(tuple) = t.batch.pop_front() {
-            timed = slow || executed % sample == 0;
+            timed = slow || executed.is_multiple_of(sample);
             if timed {
                 if executed > 0 {
                     clock = Instant::now();

@@ -372,7 +372,7 @@ impl<M: HostedModel> Matcher<M> {
         // the maps grow, every MEMORY_SAMPLE_INTERVAL-th update.
         self.updates += 1;
         if let Some(shard) = &self.shard
-            && (self.updates - 1) % MEMORY_SAMPLE_INTERVAL == 0
+            && (self.updates - 1).is_multiple_of(MEMORY_SAMPLE_INTERVAL)
         {
             let bytes = self.model.memory(shard.held().iter().map(|(_, s)| s));
             out.record("map_bytes_per_reading", bytes);
@@ -385,7 +385,7 @@ impl<M: HostedModel> Matcher<M> {
     /// the best particle emits its snapshot.
     async fn corrected(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         self.corrections += 1;
-        if self.map_interval > 0 && self.corrections % self.map_interval == 0 {
+        if self.map_interval > 0 && self.corrections.is_multiple_of(self.map_interval) {
             self.emit_snapshot(out).await?;
         }
         Ok(())
