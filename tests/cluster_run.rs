@@ -290,7 +290,10 @@ fn a_killed_coordinator_leaves_no_worker_running() {
     run.kill().unwrap();
     let _ = run.wait();
     let killed = std::time::Instant::now();
-    let deadline = killed + Duration::from_secs(5);
+    // It notices within about 2 s (a token missing a second, then a query
+    // that times out in one); 30 s bounds a worker that never notices,
+    // whatever the machine's load.
+    let deadline = killed + Duration::from_secs(30);
     let exited = loop {
         if let Some(status) = workers.children[0].try_wait().unwrap() {
             break Some(status);
@@ -302,7 +305,7 @@ fn a_killed_coordinator_leaves_no_worker_running() {
     };
     assert!(
         exited.is_some(),
-        "the worker still runs 5 s after its coordinator was killed: {}",
+        "the worker still runs 30 s after its coordinator was killed: {}",
         workers.log(0)
     );
     eprintln!("worker exited {:.2} s after its coordinator was killed", killed.elapsed().as_secs_f64());

