@@ -296,11 +296,51 @@ fn the_foxglove_view_latches_every_topic_for_a_late_viewer_and_records_every_rea
     // odom → base_link for every scan, map → odom for every estimate.
     assert_eq!(recorded["/tf"]["messages"], 2 * scans, "{recorded}");
     assert!(recorded["/squall/metrics"]["messages"].as_u64() >= Some(9), "{recorded}");
-    assert!(!dir.read_dir().unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial")));
+    assert!(!dir.read_dir().unwrap().any(|e| e.unwrap().file_name().to_string_lossy().contains(".partial")));
     // The run log says, while the run goes, how the maps grow.
     let log = stderr(&dir);
     let mut during = log.lines().filter(|l| l.contains("squall::cli::watch") && !l.contains("ended after"));
     assert!(during.any(|l| l.contains("matcher") && l.contains("map_bytes")), "{log}");
+}
+
+#[test]
+fn a_recording_left_by_a_killed_run_does_not_block_the_next() {
+    let dir = out_dir("killed-record");
+    let (out, mcap) = (dir.join("out"), dir.join("rec.mcap"));
+    let record = |scans: &str, rate: &str| {
+        Command::new(env!("CARGO_BIN_EXE_squall"))
+            .args(["slam", "--log", &shared_data("laser/aces.clf"), "--max-scans", scans, "--quiet"])
+            .args(["--set", &format!("source.params.rate={rate}")])
+            .args(["--record", mcap.to_str().unwrap(), "--out", out.to_str().unwrap()])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let partials = || -> Vec<String> {
+        let names = dir.read_dir().unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned());
+        names.filter(|n| n.starts_with(".rec.mcap.partial")).collect()
+    };
+    // A run at the log's own pace, killed (SIGKILL: nothing of it runs
+    // after) while it records.
+    let mut killed = record("2000", "1");
+    wait_for(
+        "the recording to start",
+        Duration::from_secs(60),
+        || !partials().is_empty(),
+        || partials().join(" "),
+    );
+    killed.kill().unwrap();
+    let _ = killed.wait();
+    assert_eq!(partials(), vec![format!(".rec.mcap.partial{}", killed.id())]);
+    assert!(!mcap.exists());
+    // The next run records to the same file, and removes what was left.
+    let next = finish_within(record("50", "\"max\""), Duration::from_secs(120), String::new);
+    assert!(next.status.success(), "{}", String::from_utf8_lossy(&next.stderr));
+    assert!(std::fs::metadata(&mcap).unwrap().len() > 1000);
+    assert_eq!(partials(), Vec::<String>::new());
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

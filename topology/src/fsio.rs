@@ -2,7 +2,7 @@
 
 use std::fs;
 use std::io::{self, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Writes `bytes` to `path` through a temporary file in the same directory
 /// and a rename, so `path` is either the old file or the whole new one.
@@ -20,12 +20,7 @@ pub fn write_atomic_with<E: From<io::Error>>(
 ) -> Result<(), E> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     fs::create_dir_all(dir)?;
-    let name = path
-        .file_name()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
-    let prefix = format!(".{}.tmp", name.to_string_lossy());
-    remove_stale(dir, &prefix);
-    let tmp = dir.join(format!("{prefix}{}", std::process::id()));
+    let tmp = temporary_beside(path, "tmp")?;
     let result = (|| {
         let mut out = io::BufWriter::new(fs::File::create(&tmp)?);
         write(&mut out)?;
@@ -38,6 +33,21 @@ pub fn write_atomic_with<E: From<io::Error>>(
         let _ = fs::remove_file(&tmp);
     }
     result
+}
+
+/// This process's temporary name for `path`, in its folder:
+/// `.NAME.TAG<pid>`. Those of the same `NAME.TAG` that processes no
+/// longer running left behind (killed between creating and renaming one)
+/// are removed first, so that a killed run's leftovers never block, nor
+/// litter, the next.
+pub fn temporary_beside(path: &Path, tag: &str) -> io::Result<PathBuf> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
+    let prefix = format!(".{}.{tag}", name.to_string_lossy());
+    remove_stale(dir, &prefix);
+    Ok(dir.join(format!("{prefix}{}", std::process::id())))
 }
 
 /// Removes the temporary files `prefix<pid>` in `dir` that a process no

@@ -75,8 +75,9 @@ pub fn serve(host: &str, port: u16) -> Result<WebSocketServerHandle, String> {
 }
 
 /// Records every channel into an MCAP file, written beside it under a
-/// temporary name and renamed into place when finished: a run that dies
-/// leaves no half-written file under the name asked for.
+/// temporary name (`.NAME.partial<pid>`) and renamed into place when
+/// finished: a run that dies leaves no half-written file under the name
+/// asked for, and what a killed run left is removed by the next.
 #[derive(Debug)]
 pub struct Recording {
     writer: McapWriterHandle<std::io::BufWriter<std::fs::File>>,
@@ -87,8 +88,8 @@ pub struct Recording {
 impl Recording {
     /// Starts recording into `path`.
     pub fn start(path: &Path) -> Result<Recording, String> {
-        let name = path.file_name().ok_or_else(|| format!("{}: not a file name", path.display()))?;
-        let partial = path.with_file_name(format!(".{}.partial", name.to_string_lossy()));
+        let partial = squall_topology::fsio::temporary_beside(path, "partial")
+            .map_err(|e| format!("{}: {e}", path.display()))?;
         let writer = context()
             .mcap_writer()
             .create_new_buffered_file(&partial)
