@@ -40,7 +40,25 @@ fn main() -> Result<()> {
     trajectories(&seeds, &data.join("laser"))?;
     topologies(&seeds, Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/topologies").as_path())?;
     frames(&seeds)?;
+    command_lines(&seeds)?;
     println!("seeds written under {}", out.display());
+    Ok(())
+}
+
+/// Command lines, one argument a line: each command with its numeric
+/// flags, for the `cli_args` target.
+fn command_lines(seeds: &Seeds) -> Result<()> {
+    let lines = [
+        "slam\n--log\na.clf\n--particles\n30\n--max-scans\n5\n--ui-linger\n1.5\n--metrics-every\n2\n--out\no",
+        "localize\n--map\nm.txt\n--sim\n--duration\n20\n--kidnap-at\n8\n--seed\n3\n--out\no",
+        "sim\n--duration\n600\n--beams\n180\n--fov-deg\n180\n--range-max\n30\n--out\no",
+        "study\n--sim-worlds\noffice\n--sim-duration\n60\n--seeds\n1-10,12\n--jobs\n2\n--out\no",
+        "speedup\n--particles\n20,60\n--matchers\n1,2\n--cutoff\nnone\n--out\no",
+        "run\nt.toml\n--set\nmatcher.params.particles=60\n--out\no",
+    ];
+    for (i, line) in lines.iter().enumerate() {
+        seeds.write("cli_args", &format!("command-{i}"), line.as_bytes())?;
+    }
     Ok(())
 }
 

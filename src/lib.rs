@@ -6,6 +6,7 @@
 //! uses.
 
 pub mod builtin;
+pub mod cli;
 pub mod ui;
 
 pub use squall_bolts as bolts;

@@ -1,9 +1,7 @@
 //! The `squall` command line.
 
-mod cli;
-
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    cli::main()
+    squall::cli::main()
 }

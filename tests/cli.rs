@@ -10,7 +10,7 @@ use squall::builtin::wordcount::SentenceGen;
 
 mod common;
 
-use common::{LOG_PROGRESS, finish_within, logged_progress, relation_error, shared_data, wait_for};
+use common::{LOG_PROGRESS, catches, finish_within, logged_progress, relation_error, shared_data, wait_for};
 
 fn squall(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_squall"))
@@ -377,7 +377,10 @@ fn negative_numbers_reach_their_own_checks() {
     let out = squall(&["sim", "--fov-deg", "-5", "--out", "/nonexistent-squall-out"]);
     assert_eq!(out.status.code(), Some(2));
     let stderr = text(&out.stderr);
-    assert!(stderr.contains("field of view must be in (0°, 360°], got -5°"), "{stderr}");
+    assert!(
+        stderr.contains("invalid value '-5' for '--fov-deg <FOV_DEG>': expected degrees in [1, 360]"),
+        "{stderr}"
+    );
     let out = squall(&["slam", "--particles", "-1", "--out", "/nonexistent-squall-out"]);
     assert_eq!(out.status.code(), Some(2));
     let stderr = text(&out.stderr);
@@ -429,17 +432,6 @@ fn help_shows_examples() {
     for needle in ["run", "validate", "graph", "Examples:", "--set"] {
         assert!(help.contains(needle), "{needle} missing from:\n{help}");
     }
-}
-
-/// Whether process `pid` has installed a handler for signal `number`
-/// (its bit in the caught-signals mask of Linux's /proc/PID/status).
-fn catches(pid: u32, number: u32) -> bool {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix("SigCgt:"))
-        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
-        .is_some_and(|mask| mask & (1 << (number - 1)) != 0)
 }
 
 #[test]

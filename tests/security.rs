@@ -124,10 +124,7 @@ fn with_insecure_a_robot_and_its_live_link_talk_beyond_loopback_and_warn_at_star
     assert!(stdout.contains("run=0 robot=0"), "{stdout}\n{stderr}");
     let run_log = std::fs::read_to_string(out_dir.path().join("run.err")).unwrap();
     // The robot warned at start, and so did the run, once per component.
-    assert!(
-        stderr.contains(&format!("squall robot: WARNING: insecure: {endpoint} is plain tcp/")),
-        "{stderr}"
-    );
+    assert!(stderr.contains(&format!("warning: insecure: {endpoint} is plain tcp/")), "{stderr}");
     for component in ["spout \"source\"", "bolt \"publish\""] {
         assert!(run_log.contains(&format!("{component}: insecure: {endpoint}")), "{run_log}");
     }

@@ -442,3 +442,50 @@ fn a_cluster_runs_page_shows_the_workers_tasks_and_the_traffic_between_processes
     wait_for("the run's end", Duration::from_secs(60), || api()["ended"] == true, || stderr(&dir));
     interrupt(child, &dir);
 }
+
+#[test]
+#[cfg_attr(
+    not(feature = "client-tests"),
+    ignore = "needs the Python Foxglove client (feature client-tests; ./test.sh runs it)"
+)]
+fn a_foxglove_viewer_that_stops_reading_is_dropped_not_awaited() {
+    let dir = out_dir("foxglove-stall");
+    let out = dir.join("out");
+    // ACES whole: megabytes of maps and scans, more than the stalled
+    // viewer's socket buffers hold, so the close cannot reach it.
+    let child = Command::new(env!("CARGO_BIN_EXE_squall"))
+        .args(["slam", "--log", &shared_data("laser/aces.clf"), "--foxglove", "127.0.0.1:0", "--quiet"])
+        .args(["--out", out.to_str().unwrap()])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
+        .spawn()
+        .unwrap();
+    let url = || {
+        stderr(&dir)
+            .lines()
+            .find_map(|l| Some(l.strip_prefix("Foxglove live view: ")?.split(' ').next()?.to_string()))
+    };
+    wait_for("the Foxglove view's address", Duration::from_secs(30), || url().is_some(), || stderr(&dir));
+    let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/foxglove_check.py");
+    let mut viewer = Command::new("python3")
+        .arg(client)
+        .args(["stall", &url().unwrap(), "600"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut subscribed = [0u8; 64];
+    let n = viewer.stdout.as_mut().unwrap().read(&mut subscribed).unwrap();
+    assert!(String::from_utf8_lossy(&subscribed[..n]).starts_with("subscribed "), "the viewer subscribed");
+    // The run ends, and the process with it, although the viewer holds
+    // its connection open and reads nothing (it used to wait forever).
+    let ended = finish_within(child, Duration::from_secs(120), || stderr(&dir));
+    let _ = viewer.kill();
+    let _ = viewer.wait();
+    let text = stderr(&dir);
+    assert!(ended.status.success(), "{text}");
+    assert!(text.contains("did not reach every one within 2 s") && text.contains("dropped"), "{text}");
+    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"status\": \"completed\""), "{metrics}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -51,6 +51,9 @@ pub enum Error {
         /// Its parent's slot.
         parent: usize,
     },
+    /// What the settings ask for would not fit the run's memory limit.
+    #[error(transparent)]
+    OverBudget(#[from] squall_topology::bounds::OverBudget),
     /// A line-map file that does not read or parse.
     #[error(transparent)]
     MapFile(#[from] squall_core::textfile::TextFileError),

@@ -7,6 +7,33 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose2, Real};
 
+/// Checks a scan's geometry against what a laser can be: at most
+/// [`MAX_BEAMS`](squall_topology::bounds::MAX_BEAMS) beams, a finite
+/// first angle and step, spanning at most one turn
+/// ([`MAX_SCAN_SPAN`](squall_topology::bounds::MAX_SCAN_SPAN)). Readers
+/// call it on every scan they decode, so that a corrupt record (a million
+/// beams over 2800 turns) is an error naming it, not work and memory
+/// spent on it.
+pub fn check_scan_geometry(beams: usize, angle_min: Real, angle_increment: Real) -> Result<(), String> {
+    use squall_topology::bounds::{MAX_BEAMS, MAX_SCAN_SPAN};
+    if beams > MAX_BEAMS {
+        return Err(format!("{beams} beams: expected at most {MAX_BEAMS} (no laser has more)"));
+    }
+    if !(angle_min.is_finite() && angle_increment.is_finite()) {
+        return Err(format!(
+            "angle_min {angle_min} and angle_increment {angle_increment}: expected finite angles"
+        ));
+    }
+    let span = angle_increment.abs() * beams.saturating_sub(1) as Real;
+    if span > MAX_SCAN_SPAN {
+        return Err(format!(
+            "{beams} beams {angle_increment} rad apart span {:.1} turns: expected at most one turn",
+            span / std::f64::consts::TAU
+        ));
+    }
+    Ok(())
+}
+
 /// One planar laser scan.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LaserReading {
@@ -30,6 +57,12 @@ pub struct LaserReading {
 }
 
 impl LaserReading {
+    /// Checks the scan's geometry against what a laser can be (see
+    /// [`check_scan_geometry`]).
+    pub fn check_geometry(&self) -> Result<(), String> {
+        check_scan_geometry(self.ranges.len(), self.angle_min, self.angle_increment)
+    }
+
     /// Whether beam `i` measured something.
     pub fn is_valid(&self, i: usize) -> bool {
         let r = Real::from(self.ranges[i]);

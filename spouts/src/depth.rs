@@ -11,6 +11,8 @@ use squall_core::camera::DepthFrame;
 use squall_core::depth_render::{Clutter, DepthCamera, Props};
 use squall_core::linemap::LineMap;
 use squall_core::sensor::PoseStamped;
+use squall_topology::bounds::MAX_SIM_SECS;
+use squall_topology::spec::readable_number;
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
 };
@@ -19,6 +21,10 @@ use crate::sim::office::Floor;
 use crate::sim::people::Crowd;
 use crate::sim::{DEFAULT_WORLD, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for};
 use crate::{Error, Result};
+
+/// The fastest simulated frame rate: 1 kHz, ten times the fastest depth
+/// camera sold (90 frames a second).
+const MAX_FRAME_HZ: f64 = 1000.0;
 
 /// The `depth_sim` spout's params; a param left out takes its value from
 /// [`P::default`].
@@ -117,9 +123,27 @@ impl DepthSimSpout {
     /// Builds the spout from its `params`.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
         let params: P = p.parse()?;
-        if !(params.duration_secs > 0.0 && params.frame_hz > 0.0) {
-            return Err(ParamError::new("duration_secs and frame_hz must be > 0"));
+        let hz_ok = params.frame_hz > 0.0 && params.frame_hz <= MAX_FRAME_HZ;
+        if !(params.duration_secs > 0.0 && params.duration_secs <= MAX_SIM_SECS && hz_ok) {
+            return Err(ParamError::new(format!(
+                "duration_secs must be in (0, {MAX_SIM_SECS}] (stamps keep a microsecond's resolution) \
+                 and frame_hz in (0, {MAX_FRAME_HZ}], got {} and {}",
+                readable_number(params.duration_secs),
+                readable_number(params.frame_hz)
+            )));
         }
+        let frames = params.duration_secs * params.frame_hz;
+        p.budget()
+            .check(
+                format!(
+                    "a simulated run of {} s ({} frames of about {} bytes each in the run's outputs)",
+                    readable_number(params.duration_secs),
+                    readable_number(frames.ceil()),
+                    crate::sim::OUTPUT_BYTES_PER_SCAN
+                ),
+                frames * crate::sim::OUTPUT_BYTES_PER_SCAN as f64,
+            )
+            .map_err(ParamError::new)?;
         let seed = params.seed.unwrap_or(p.seed());
         Ok(DepthSimSpout {
             p: params,

@@ -44,11 +44,21 @@ pub enum Error {
         /// Why there is no roadmap.
         source: RoadmapError,
     },
-    /// The simulated time is not a positive number of seconds.
-    #[error("duration must be > 0 s, got {0}")]
+    /// A signal stopped the process (Ctrl-C or SIGTERM) while a run was
+    /// simulated into files.
+    #[error("stopped (Ctrl-C or SIGTERM) while the run was simulated")]
+    Stopped,
+    /// The simulated time is not a positive number of seconds, or is
+    /// past [`MAX_SIM_SECS`](squall_topology::bounds::MAX_SIM_SECS).
+    #[error(
+        "duration_secs must be > 0 s and at most {} s (stamps keep a microsecond's resolution), got {}",
+        squall_topology::bounds::MAX_SIM_SECS,
+        squall_topology::spec::readable_number(*.0)
+    )]
     Duration(Real),
-    /// Fewer than 2 laser beams: a scan needs a first and a last.
-    #[error("beams must be at least 2, got {0}")]
+    /// Fewer than 2 laser beams (a scan needs a first and a last), or more
+    /// than [`MAX_BEAMS`](squall_topology::bounds::MAX_BEAMS).
+    #[error("beams must be in 2..={max}, got {0}", max = squall_topology::bounds::MAX_BEAMS)]
     Beams(usize),
     /// The field of view (radians) is not in (0, 2π].
     #[error("field of view must be in (0°, 360°], got {}°", .0.to_degrees())]

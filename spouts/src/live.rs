@@ -326,12 +326,11 @@ impl LiveIngest {
             &params.unknown,
             &[&LINK_FIELDS[..], &["scan_topic", "idle_secs", "laser_offset"]].concat(),
         )?;
-        let idle = match params.idle_secs {
-            Some(s) if !(s.is_finite() && s > 0.0) => {
-                return Err(ParamError::new("idle_secs: expected seconds > 0"));
-            }
-            s => s.map(Duration::from_secs_f64),
-        };
+        let idle = params
+            .idle_secs
+            .map(|s| squall_topology::bounds::wait_secs("idle_secs", s, false))
+            .transpose()
+            .map_err(ParamError::new)?;
         let [x, y, theta] = params.laser_offset;
         let link = Link::from_params(params.link)?;
         let odometry = OdometryTrack::new(&link.odom_frame, &link.base_frame);
@@ -433,7 +432,10 @@ impl LiveIngest {
                             let Ok(sample) = sample else { return Ok(SpoutStatus::Done) };
                             self.heard = true;
                             out.count("scans_received", 1);
-                            let reading = postcard::from_bytes::<LaserReading>(&sample.payload().to_bytes()).ok();
+                            // A scan no laser could make counts as malformed.
+                            let reading = postcard::from_bytes::<LaserReading>(&sample.payload().to_bytes())
+                                .ok()
+                                .filter(|r| r.check_geometry().is_ok());
                             if self.emit(reading, out).await? {
                                 return Ok(SpoutStatus::Continue);
                             }
@@ -602,13 +604,13 @@ impl LivePublish {
         let params: PublishParams = p.parse()?;
         let own = ["pose_topic", "map_topic", "map_interval_secs", "frame_id"];
         no_unknown(&params.unknown, &[&LINK_FIELDS[..], &own].concat())?;
-        if !(params.map_interval_secs.is_finite() && params.map_interval_secs >= 0.0) {
-            return Err(ParamError::new("map_interval_secs: expected seconds ≥ 0"));
-        }
+        let map_interval =
+            squall_topology::bounds::wait_secs("map_interval_secs", params.map_interval_secs, true)
+                .map_err(ParamError::new)?;
         Ok(LivePublish {
             topics: (topic("pose_topic", &params.pose_topic)?, topic("map_topic", &params.map_topic)?),
             link: Link::from_params(params.link)?,
-            map_interval: Duration::from_secs_f64(params.map_interval_secs),
+            map_interval,
             last_map: None,
             frame_id: params.frame_id,
             outputs: None,

@@ -126,6 +126,26 @@ struct Scores {
     truth: Option<TruthScore>,
 }
 
+impl Scores {
+    /// Whether every error is a finite number: coordinates near `f64`'s
+    /// largest make differences and squares overflow, and "ATE: inf" is no
+    /// score.
+    fn finite(&self) -> bool {
+        let mut errors: Vec<f64> = Vec::new();
+        if let Some(r) = &self.relations {
+            errors.extend([r.trans_mean, r.trans_std, r.rot_mean_deg, r.rot_std_deg]);
+        }
+        match &self.truth {
+            Some(TruthScore::Aligned(g)) => {
+                errors.extend([g.ate_rmse, g.ate_rot_mean_deg, g.rpe_trans_rmse, g.rpe_rot_rmse_deg]);
+            }
+            Some(TruthScore::Map(m)) => errors.extend([m.map_mean_m, m.map_max_m, m.map_rot_mean_deg]),
+            None => {}
+        }
+        errors.iter().all(|e| e.is_finite())
+    }
+}
+
 impl Frame {
     fn name(self) -> &'static str {
         match self {
@@ -199,7 +219,14 @@ fn scores(args: &EvalArgs) -> Result<Scores, String> {
         }
         None => None,
     };
-    Ok(Scores { trajectory, frame, relations: rel, truth })
+    let scores = Scores { trajectory, frame, relations: rel, truth };
+    if !scores.finite() {
+        return Err(format!(
+            "{}: the errors do not fit a double (coordinates near 1e308?): no finite score",
+            args.trajectory.display()
+        ));
+    }
+    Ok(scores)
 }
 
 /// The trajectory and the frame its file declares (a CARMEN log's

@@ -9,7 +9,11 @@ use squall_core::eval::map_frame;
 use squall_core::geometry::Pose2;
 use squall_core::trajectory::Trajectory;
 
-use squall_spouts::sim::{Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for, top_speed_for};
+use squall_spouts::sim::{
+    Carry, Kidnap, OUTPUT_BYTES_PER_SCAN, SimConfig, SimEvent, Simulation, Start, floor_for, top_speed_for,
+};
+use squall_topology::bounds::MemoryBudget;
+use squall_topology::spec::readable_number;
 use squall_topology::{Override, Topology};
 
 use super::eval::print_map_frame;
@@ -27,7 +31,7 @@ pub(super) struct LocalizeArgs {
     #[arg(long)]
     sim: bool,
     /// Simulated seconds.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(long, default_value_t = 120.0, value_parser = super::numbers::sim_secs)]
     duration: f64,
     /// The simulated sensor: `laser`, or `depth` (a D435-like camera,
     /// plane filtered by FSPF).
@@ -37,10 +41,10 @@ pub(super) struct LocalizeArgs {
     /// 2000) and keeps fewer as they gather (KLD-sampling), down to 50; a
     /// known start begins with 50 and grows towards 2000 only when the
     /// robot is lost. Given, a known start keeps exactly this many.
-    #[arg(long)]
-    particles: Option<usize>,
+    #[arg(long, value_parser = super::numbers::positive_count)]
+    particles: Option<u64>,
     /// Matcher tasks (the results do not depend on it).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::numbers::tasks)]
     matchers: usize,
     /// How the new set is drawn.
     #[arg(long, value_name = "low-variance|sparse-ring|global", default_value = "low-variance")]
@@ -58,11 +62,11 @@ pub(super) struct LocalizeArgs {
     /// a place of the map 5–20 m away (drawn per seed) without its
     /// odometry noticing. metrics.json then says how long the localizer
     /// took to find it again.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = super::numbers::sim_instant)]
     kidnap_at: Option<f64>,
     /// Run seed (the simulated robot's start, route and noise, and the
     /// filter).
-    #[arg(long, default_value_t = 42)]
+    #[arg(long, default_value_t = 42, value_parser = super::numbers::seed)]
     seed: u64,
     /// Override any value (as in `squall run`).
     #[arg(long = "set", value_name = "PATH=VALUE", value_parser = super::parse_override)]
@@ -81,11 +85,11 @@ pub(super) struct LocalizeArgs {
 /// Particles a global start begins with: where the first reading fits
 /// (see `CgrModel::propose`), enough that the robot's pose is among them
 /// on the shared maps (docs/results/localization.md, decision 0018).
-const GLOBAL_PARTICLES: usize = 2000;
+const GLOBAL_PARTICLES: u64 = 2000;
 
 /// Particles that track a robot already found (and the fewest a global
 /// start keeps).
-const TRACKING_PARTICLES: usize = 50;
+const TRACKING_PARTICLES: u64 = 50;
 
 /// Independent points a plane patch of the depth path's FSPF counts as:
 /// its samples fix the wall's offset and direction there, and share the
@@ -241,6 +245,19 @@ struct Route {
 /// odometry. An error if the settings are out of range or no place of the
 /// map lies 5–20 m from where the robot is to be kidnapped.
 fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route, String> {
+    // The route's odometry, and the run's outputs, grow with its scans.
+    let scans = args.duration * SimConfig::default().scan_hz;
+    MemoryBudget::for_run(Override::memory_limit(&args.overrides))
+        .check(
+            format!(
+                "--duration {}: a simulated run of {} scans of about {OUTPUT_BYTES_PER_SCAN} bytes each in \
+                 the run's outputs",
+                readable_number(args.duration),
+                readable_number(scans.ceil())
+            ),
+            scans * OUTPUT_BYTES_PER_SCAN as f64,
+        )
+        .map_err(|e| e.to_string())?;
     let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
     let kidnap = args.kidnap_at.map(|at_secs| Kidnap {
         at_secs,
@@ -267,12 +284,24 @@ fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route
     let mut sim = Simulation::new(floor, config).map_err(|e| e.to_string())?;
     let mut first: Option<(Pose2, Pose2)> = None;
     let mut odometry = Trajectory::default();
+    let stop = squall_topology::runtime::process_stop();
     for event in sim.by_ref() {
+        if stop.is_made() {
+            return Err("stopped while the simulated route was replayed".into());
+        }
         let SimEvent::Scan(scan, truth) = event else { continue };
         let (truth0, odometry0) = *first.get_or_insert((truth, scan.odometry));
         odometry.push(scan.stamp, truth0.compose(&scan.odometry.relative_to(&odometry0)));
     }
-    let start = first.ok_or("the simulation produced no scan")?.0;
+    let start = first
+        .ok_or_else(|| {
+            format!(
+                "--duration {}: too short for one scan (the simulated sensor gives one each {} s)",
+                readable_number(args.duration),
+                1.0 / SimConfig::default().scan_hz
+            )
+        })?
+        .0;
     let carry = sim.carried();
     if let (Some(k), Some(c)) = (kidnap, carry)
         && !(k.min_m..=k.max_m).contains(&c.distance())
@@ -292,6 +321,7 @@ fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route
 pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
     let (overrides, route) = match overrides(args) {
         Ok(o) => o,
+        Err(_) if super::signals::stopping() => return run::stopped_before_start(Some(&args.out)),
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::from(EXIT_INVALID);
@@ -316,12 +346,13 @@ pub(super) fn localize(args: &LocalizeArgs) -> ExitCode {
         text.push_str(&super::watch::view_bolt(&inputs, &format!("line_map = {}", quoted(&map))));
     }
     let spec =
-        Topology::from_text("localize.toml (built in)", &text, &overrides, &squall::builtin::registry());
+        Topology::from_text("localize.toml (built in)", &text, &overrides, &crate::builtin::registry());
     let scorer = |dir: &Path| score(dir, &route, args.quiet);
     match report_invalid(spec) {
         Ok(topology) => {
             run::run_scored(&topology, Some(args.out.clone()), args.quiet, None, &args.watch, Some(&scorer))
         }
+        Err(_) if super::signals::stopping() => run::stopped_before_start(Some(&args.out)),
         Err(code) => code,
     }
 }

@@ -1,4 +1,6 @@
-//! Argument parsing and the subcommands.
+//! The `squall` command line: argument parsing and the subcommands. The
+//! binary is a one-line `main` calling [`main`]; the library holds it so
+//! that the fuzz targets and tests reach the argument checks.
 
 /// `print!` to stdout that does not panic when the reader has gone
 /// (`squall graph big.toml | head -1`): the process ends quietly, with the
@@ -19,10 +21,12 @@ macro_rules! outln {
 
 mod eval;
 mod localize;
+mod numbers;
 mod progress;
 #[cfg(feature = "cluster")]
 mod robot;
 mod run;
+mod signals;
 mod sim;
 mod slam;
 mod speedup;
@@ -141,8 +145,9 @@ enum Command {
     Robot(robot::RobotArgs),
 }
 
-/// Parses arguments, runs the command, maps errors to exit codes.
-pub(crate) fn main() -> ExitCode {
+/// The `squall` command: parses arguments, runs the command, maps errors
+/// to exit codes.
+pub fn main() -> ExitCode {
     init_logging();
     // A write past a file-size limit (`ulimit -f`, a quota) then fails
     // with an error naming the file, instead of the signal killing the
@@ -159,9 +164,20 @@ pub(crate) fn main() -> ExitCode {
             return if e.use_stderr() { ExitCode::from(EXIT_INVALID) } else { ExitCode::SUCCESS };
         }
     };
+    if matches!(
+        cli.command,
+        Command::Run { .. }
+            | Command::Slam(_)
+            | Command::Localize(_)
+            | Command::Speedup(_)
+            | Command::Study(_)
+    ) {
+        signals::install();
+    }
     match cli.command {
         Command::Run { topology, out, quiet, cluster, watch } => match load(&topology) {
             Ok(t) => run::run(&t, out, quiet, cluster.as_deref(), &watch),
+            Err(_) if signals::stopping() => run::stopped_before_start(out.as_deref()),
             Err(code) => {
                 // An unusable --out is reported with the topology's errors.
                 if let Some(dir) = &out {
@@ -209,7 +225,7 @@ pub(crate) fn main() -> ExitCode {
         #[cfg(feature = "cluster")]
         Command::Robot(args) => robot::robot(&args),
         Command::Kinds => {
-            let registry = squall::builtin::registry();
+            let registry = crate::builtin::registry();
             outln!("spouts:");
             for k in registry.spout_kinds() {
                 outln!("  {k}");
@@ -226,7 +242,7 @@ pub(crate) fn main() -> ExitCode {
 /// Parses and validates a topology; on failure prints every error and
 /// returns the exit code.
 fn load(args: &TopologyArgs) -> Result<Topology, ExitCode> {
-    report_invalid(Topology::load(&args.file, &args.overrides, &squall::builtin::registry()))
+    report_invalid(Topology::load(&args.file, &args.overrides, &crate::builtin::registry()))
 }
 
 /// A topology, or every error found in it printed and the exit code.
@@ -242,17 +258,34 @@ fn report_invalid(validated: Result<Topology, SpecErrors>) -> Result<Topology, E
     })
 }
 
+/// Parses and checks a command line (`args` after the program's name)
+/// as `squall` does before it runs anything: every flag's value against
+/// its bound. `Err` is clap's message, as `squall` would print it. For the
+/// fuzz target of the command line.
+pub fn check_args<I, T>(args: I) -> Result<(), String>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let args = std::iter::once(std::ffi::OsString::from("squall")).chain(args.into_iter().map(Into::into));
+    let matches = negatives(Cli::command()).try_get_matches_from(args).map_err(|e| e.to_string())?;
+    Cli::from_arg_matches(&matches).map(drop).map_err(|e| e.to_string())
+}
+
+/// Every option that takes a value takes negative numbers (see
+/// [`parse_args`]).
+fn negatives(command: clap::Command) -> clap::Command {
+    command
+        .mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
+        .mut_subcommands(negatives)
+}
+
 /// Parses the command line. Every option that takes a value takes
 /// negative numbers, so that `--particles -1` is refused as a value of
 /// `--particles` (not a count) rather than read as an unknown flag `-1`.
 /// (Flags take no value: clap's checks, which run in debug builds, refuse
 /// the setting on them.)
 fn parse_args() -> Result<Cli, clap::Error> {
-    fn negatives(command: clap::Command) -> clap::Command {
-        command
-            .mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
-            .mut_subcommands(negatives)
-    }
     let matches = negatives(Cli::command()).try_get_matches()?;
     Cli::from_arg_matches(&matches)
 }

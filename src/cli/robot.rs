@@ -36,17 +36,17 @@ pub(super) struct RobotArgs {
     #[arg(long, default_value = "ros2", value_parser = ["ros2", "cdr", "squall"])]
     format: String,
     /// Playback speed: 1 is the log's own pace.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::numbers::speed)]
     speed: f64,
     /// Play only the first N scans.
     #[arg(long, value_name = "N")]
     max_scans: Option<usize>,
     /// How long to wait for the last poses after the last scan, seconds, at
     /// most: the wait ends when the last scan's pose arrives.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = super::numbers::wait_secs)]
     wait_secs: f64,
     /// How long to wait for the link to come up, seconds.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = super::numbers::positive_wait_secs)]
     connect_secs: f64,
     #[command(flatten)]
     tls: TlsArgs,
@@ -67,36 +67,36 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
     let connect = match endpoints(&args.connect) {
         Ok(c) => c,
         Err(e) => {
-            eprintln!("squall robot: {e}");
+            eprintln!("error: {e}");
             return ExitCode::from(EXIT_INVALID);
         }
     };
     let tls = match args.tls.spec(&connect) {
         Ok(t) => t,
         Err(e) => {
-            eprintln!("squall robot: {e}");
+            eprintln!("error: {e}");
             return ExitCode::from(EXIT_INVALID);
         }
     };
     if let Some(exposed) = exposed_endpoint(&connect) {
         if !args.insecure {
-            eprintln!("squall robot: {}", exposure_refusal(exposed, LIVE_LINK_RISK, "pass --insecure"));
+            eprintln!("error: {}", exposure_refusal(exposed, LIVE_LINK_RISK, "pass --insecure"));
             return ExitCode::from(EXIT_INVALID);
         }
         for e in connect.iter().filter(|e| e.is_exposed()) {
             let warning = exposure_warning(e, LIVE_LINK_RISK);
-            eprintln!("squall robot: WARNING: {warning} (--insecure)");
+            eprintln!("warning: {warning} (--insecure)");
         }
     }
     if !(args.speed.is_finite() && args.speed > 0.0) {
-        eprintln!("squall robot: --speed {}: expected a factor > 0", args.speed);
+        eprintln!("error: --speed {}: expected a factor > 0", args.speed);
         return ExitCode::from(EXIT_INVALID);
     }
     let format = if args.format == "squall" { Format::Squall } else { Format::Ros2 };
     let mut scans = match read_front_scans(&args.log, ReadOptions::default()) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("squall robot: {e}");
+            eprintln!("error: {e}");
             return ExitCode::from(EXIT_INVALID);
         }
     };
@@ -104,7 +104,7 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
     let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("squall robot: cannot start the runtime: {e}");
+            eprintln!("error: cannot start the runtime: {e}");
             return ExitCode::from(EXIT_FAILED);
         }
     };
@@ -116,7 +116,7 @@ pub(super) fn robot(args: &RobotArgs) -> ExitCode {
     )) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("squall robot: {e}");
+            eprintln!("error: {e}");
             ExitCode::from(EXIT_FAILED)
         }
     }

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use squall_topology::fsio::write_atomic;
-use squall_topology::{Progress, RunError, RunOptions, RunReport, StopRequest, Topology};
+use squall_topology::{Progress, RunError, RunOptions, RunReport, Topology};
 
 use super::watch::{Watch, WatchArgs};
 use super::{EXIT_FAILED, EXIT_INVALID, progress::ProgressDisplay, writable_out};
@@ -51,6 +51,9 @@ pub(super) fn run_scored(
     if invalid {
         return ExitCode::from(EXIT_INVALID);
     }
+    if super::signals::stopping() {
+        return stopped_before_start(out.as_deref());
+    }
     let mut watching = match Watch::start(watch, out.as_deref()) {
         Ok(w) => w,
         Err(message) => {
@@ -66,9 +69,9 @@ pub(super) fn run_scored(
         out_dir: out.clone(),
         progress: watched,
         live: watching.live(),
+        stop: squall_topology::runtime::process_stop(),
         ..RunOptions::default()
     };
-    stop_on_ctrl_c(options.stop.clone());
     let result = match cluster {
         None => {
             let display = ProgressDisplay::start(progress);
@@ -84,7 +87,20 @@ pub(super) fn run_scored(
             }
         },
     };
-    if options.stop.is_made() {
+    // A stop whose drain passed its bound is still a stop: the run
+    // ends "stopped", its warning saying what was abandoned.
+    let mut drain_note = None;
+    let result = match result {
+        Err(RunError::DrainTimedOut { secs, report }) => {
+            drain_note = Some(format!(
+                "stopped, and not drained within {secs} s: what was still in flight was abandoned \
+                 (counted as undelivered)"
+            ));
+            Ok(*report)
+        }
+        other => other,
+    };
+    if options.stop.is_made() && drain_note.is_none() {
         eprintln!("note: stopped early (Ctrl-C or SIGTERM); everything already emitted was processed");
     }
     let (mut report, failure) = match result.map_err(RunError::into_parts) {
@@ -97,6 +113,10 @@ pub(super) fn run_scored(
         }
     };
     report.warnings.extend(watching.warnings().iter().cloned());
+    if let Some(note) = &drain_note {
+        eprintln!("warning: {note}");
+        report.warnings.push(note.clone());
+    }
     if let Some(live) = watching.live() {
         live.finish(&report);
     }
@@ -108,6 +128,8 @@ pub(super) fn run_scored(
     if !quiet {
         out!("{report}");
     }
+    // A run aborted at the end of its drain wrote no outputs to score.
+    let scorer = scorer.filter(|_| drain_note.is_none());
     let score = match (&out, scorer, &failure) {
         (Some(dir), Some(scorer), None) => match scorer(dir) {
             Ok(score) => Some(score),
@@ -214,43 +236,19 @@ pub(super) fn write_metrics(
     write_atomic(&dir.join("metrics.json"), json.as_bytes())
 }
 
-/// First Ctrl-C or SIGTERM (how containers and service managers stop a
-/// process): stop the spouts and let the run drain and finish, metrics
-/// and outputs written. Second: exit at once.
-fn stop_on_ctrl_c(stop: Arc<StopRequest>) {
-    let spawned = std::thread::Builder::new().name("ctrl-c".into()).spawn(move || {
-        let Ok(rt) = tokio::runtime::Builder::new_current_thread().enable_all().build() else { return };
-        rt.block_on(async {
-            let Some(name) = stop_signal().await else { return };
-            eprintln!("\nstopping on {name}: draining tuples in flight (Ctrl-C again to abort)");
-            stop.request();
-            if let Some(name) = stop_signal().await {
-                eprintln!("aborted on {name}");
-                std::process::exit(130);
-            }
-        });
-    });
-    if let Err(e) = spawned {
-        tracing::warn!("cannot watch for Ctrl-C: {e}");
-    }
-}
-
-/// The next Ctrl-C or SIGTERM, by name; `None` when neither can be
-/// watched.
-async fn stop_signal() -> Option<&'static str> {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => tokio::select! {
-                r = tokio::signal::ctrl_c() => r.ok().map(|()| "Ctrl-C"),
-                _ = term.recv() => Some("SIGTERM"),
-            },
-            Err(_) => tokio::signal::ctrl_c().await.ok().map(|()| "Ctrl-C"),
+/// A run stopped by a signal before it started (while its inputs were
+/// read or its structures built): metrics.json says "stopped" at
+/// "setup", with nothing run.
+pub(super) fn stopped_before_start(out: Option<&Path>) -> ExitCode {
+    eprintln!("note: stopped (Ctrl-C or SIGTERM) before the run started; nothing ran");
+    if let Some(dir) = out {
+        let json = serde_json::json!({ "status": "stopped", "stage": "setup" });
+        let written = squall_topology::fsio::check_writable_dir(dir)
+            .and_then(|()| write_atomic(&dir.join("metrics.json"), json.to_string().as_bytes()));
+        if let Err(e) = written {
+            eprintln!("error: cannot write {}: {e}", dir.join("metrics.json").display());
+            return ExitCode::from(EXIT_FAILED);
         }
     }
-    #[cfg(not(unix))]
-    {
-        tokio::signal::ctrl_c().await.ok().map(|()| "Ctrl-C")
-    }
+    ExitCode::SUCCESS
 }

@@ -7,6 +7,9 @@ use std::time::Instant;
 use squall_spouts::sim::output::write_run;
 use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for, laser_range_for, top_speed_for};
 
+use squall_topology::bounds::MemoryBudget;
+use squall_topology::spec::readable_number;
+
 use super::{EXIT_FAILED, EXIT_INVALID};
 
 #[derive(Debug, clap::Args)]
@@ -17,25 +20,31 @@ pub(super) struct SimArgs {
     #[arg(long, default_value = "office")]
     world: String,
     /// Simulated seconds.
-    #[arg(long, default_value_t = 600.0)]
+    #[arg(long, default_value_t = 600.0, value_parser = super::numbers::sim_secs)]
     duration: f64,
     /// Seed of the world, the route and every noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Laser beams over the field of view.
-    #[arg(long, default_value_t = 180)]
+    #[arg(long, default_value_t = 180, value_parser = super::numbers::beams)]
     beams: usize,
     /// Laser field of view, degrees.
-    #[arg(long, default_value_t = 180.0)]
+    #[arg(long, default_value_t = 180.0, value_parser = super::numbers::fov_deg)]
     fov_deg: f64,
     /// Laser range, metres (farther walls give no return). The default is
     /// 80 on the campus, 30 elsewhere.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::range_m)]
     range_max: Option<f64>,
     /// Wheel odometry: good (0.2–0.5% scale error, 0.02–0.05°/m heading
     /// drift), poor (1–2%, 0.15–0.35°/m) or bad (3–5%, 0.5–0.8°/m).
     #[arg(long, default_value = "poor", value_name = "good|poor|bad")]
     odometry: OdometryQuality,
+    /// The most memory the log may take while it is made (it is written
+    /// whole when the run ends), MiB; the default is 90% of the
+    /// machine's. A --duration whose log would not fit is refused before
+    /// anything runs.
+    #[arg(long, value_name = "MIB", value_parser = super::numbers::positive_count)]
+    memory_limit_mb: Option<u64>,
     /// Output folder: sim.clf, ground_truth.tum, sim.relations, world.png.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -43,10 +52,6 @@ pub(super) struct SimArgs {
 
 /// Runs `squall sim`.
 pub(super) fn sim(args: &SimArgs) -> ExitCode {
-    if !(args.duration.is_finite() && args.duration > 0.0) || args.beams < 2 {
-        eprintln!("error: --duration must be > 0 and --beams at least 2");
-        return ExitCode::from(EXIT_INVALID);
-    }
     let config = SimConfig {
         seed: args.seed,
         duration_secs: args.duration,
@@ -57,6 +62,24 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
         odometry: args.odometry,
         ..SimConfig::default()
     };
+    // The log is held whole until written: a FLASER line of up to 7
+    // characters a beam and its stamps and poses, an ODOM line per
+    // physics step, a ground-truth pose a scan.
+    let scans = args.duration * config.scan_hz;
+    let per_scan = (args.beams * 7 + 400) as f64;
+    let limit = args.memory_limit_mb.map(|mb| mb.saturating_mul(1 << 20));
+    if let Err(e) = MemoryBudget::for_run(limit).raised_with("--memory-limit-mb").check(
+        format!(
+            "--duration {}: a log of {} scans of {} beams",
+            readable_number(args.duration),
+            readable_number(scans.ceil()),
+            args.beams
+        ),
+        scans * per_scan,
+    ) {
+        eprintln!("error: {e}");
+        return ExitCode::from(EXIT_INVALID);
+    }
     let started = Instant::now();
     let floor = match floor_for(&args.world, args.seed) {
         Ok(f) => f,

@@ -17,20 +17,20 @@ pub(super) struct SlamArgs {
     #[arg(long, value_name = "FILE")]
     pub(super) log: Option<PathBuf>,
     /// Particles.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::positive_count)]
     pub(super) particles: Option<u64>,
     /// Pose evaluations per particle per reading: a number or `none`.
-    #[arg(long, value_name = "N|none")]
+    #[arg(long, value_name = "N|none", value_parser = crate::cli::numbers::cutoff)]
     pub(super) cutoff: Option<String>,
     /// Matcher tasks, each holding a share of the particles (the results
     /// do not depend on it).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::numbers::tasks)]
     pub(super) matchers: usize,
     /// Stop after this many scans.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::positive_count)]
     pub(super) max_scans: Option<u64>,
     /// Run seed.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::seed)]
     pub(super) seed: Option<u64>,
     /// Another topology file instead of the built-in slam.toml.
     #[arg(long, value_name = "FILE")]
@@ -109,7 +109,7 @@ pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
         ExitCode::from(EXIT_INVALID)
     })?;
     let spec = match &args.topology {
-        Some(file) => Topology::load(file, &overrides, &squall::builtin::registry()),
+        Some(file) => Topology::load(file, &overrides, &crate::builtin::registry()),
         None => {
             let mut text = SLAM_TOML.to_string();
             if args.watch.viewed() {
@@ -124,7 +124,7 @@ pub(super) fn topology(args: &SlamArgs) -> Result<Topology, ExitCode> {
                 ];
                 text.push_str(&super::watch::view_bolt(&inputs, ""));
             }
-            Topology::from_text("slam.toml (built in)", &text, &overrides, &squall::builtin::registry())
+            Topology::from_text("slam.toml (built in)", &text, &overrides, &crate::builtin::registry())
         }
     };
     report_invalid(spec)
@@ -149,6 +149,7 @@ pub(super) fn slam(args: &SlamArgs) -> ExitCode {
         Ok(topology) => {
             run::run(&topology, Some(args.out.clone()), args.quiet, args.cluster.as_deref(), &args.watch)
         }
+        Err(_) if super::signals::stopping() => run::stopped_before_start(Some(&args.out)),
         Err(code) => code,
     }
 }

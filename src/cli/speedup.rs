@@ -22,19 +22,19 @@ pub(super) struct SpeedupArgs {
     #[arg(long, value_name = "FILE")]
     log: Option<PathBuf>,
     /// Particle counts to run.
-    #[arg(long, value_delimiter = ',', default_value = "20,60,100")]
+    #[arg(long, value_delimiter = ',', default_value = "20,60,100", value_parser = super::numbers::positive_count)]
     particles: Vec<u64>,
     /// Matcher task counts to run (1 is the baseline).
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = super::numbers::tasks)]
     matchers: Vec<usize>,
     /// Pose evaluations per particle per reading: a number or `none`.
-    #[arg(long, value_name = "N|none")]
+    #[arg(long, value_name = "N|none", value_parser = crate::cli::numbers::cutoff)]
     cutoff: Option<String>,
     /// Stop each run after this many scans.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::positive_count)]
     max_scans: Option<u64>,
     /// Run seed.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::seed)]
     seed: Option<u64>,
     /// Output folder: speedup.csv, speedup.svg and one folder per run.
     #[arg(long, value_name = "DIR")]

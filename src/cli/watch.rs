@@ -11,8 +11,8 @@ use std::sync::mpsc::{self, RecvTimeoutError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use squall::bolts::view::{self, Recording};
-use squall::ui::UiServer;
+use crate::bolts::view::{self, Recording};
+use crate::ui::UiServer;
 use squall_topology::live::{LiveSample, Sampler};
 use squall_topology::{CustomMetric, LiveRun, RunReport, StopRequest};
 
@@ -32,7 +32,7 @@ pub(super) struct WatchArgs {
     pub(super) ui: Option<SocketAddr>,
     /// Keep the live page and the Foxglove view up this many seconds
     /// after the run ends (Ctrl-C ends the wait).
-    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = parse_secs)]
+    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = super::numbers::wait_secs)]
     pub(super) ui_linger: f64,
     /// Serve a live view for Foxglove (its WebSocket protocol) on
     /// HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one): the map,
@@ -47,7 +47,7 @@ pub(super) struct WatchArgs {
     pub(super) record: Option<PathBuf>,
     /// Also write metrics.json every SECS while the run goes (atomically,
     /// with "status": "running"); needs an output folder.
-    #[arg(long, value_name = "SECS", value_parser = parse_period)]
+    #[arg(long, value_name = "SECS", value_parser = super::numbers::period_secs)]
     pub(super) metrics_every: Option<f64>,
     /// Serve --ui and --foxglove beyond loopback, without authentication
     /// (anyone who reaches them sees the run: its topology, counters,
@@ -125,20 +125,6 @@ fn parse_host_port(s: &str) -> Result<(String, u16), String> {
         return Err(expected());
     }
     Ok((host.to_string(), port))
-}
-
-fn parse_secs(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err("expected a number of seconds, 0 or more".into()),
-    }
-}
-
-fn parse_period(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.1 => Ok(v),
-        _ => Err("expected a number of seconds, 0.1 or more".into()),
-    }
 }
 
 /// What watches one run; [`finish`](Self::finish) it when the run has
@@ -297,9 +283,35 @@ impl Watch {
             ui.stop();
         }
         if let Some(f) = self.foxglove.take() {
-            f.stop().wait_blocking();
+            let viewers = f.client_count();
+            if !closed_within(f.stop(), VIEWER_CLOSE) {
+                eprintln!(
+                    "warning: Foxglove view: {viewers} viewer{} connected, and the close did not reach every \
+                     one within {} s (a viewer that stopped reading): dropped",
+                    if viewers == 1 { "" } else { "s" },
+                    VIEWER_CLOSE.as_secs()
+                );
+            }
         }
     }
+}
+
+/// How long the Foxglove view's close may wait for its viewers to take
+/// it: a viewer reading its socket takes it in milliseconds; one that
+/// stopped reading never does, and is dropped rather than awaited.
+const VIEWER_CLOSE: Duration = Duration::from_secs(2);
+
+/// Waits up to `limit` for the Foxglove server's graceful shutdown;
+/// past it the handle is dropped, which aborts the tasks of the viewers
+/// still being closed. Whether every viewer was closed in time.
+fn closed_within(handle: foxglove::websocket::ShutdownHandle, limit: Duration) -> bool {
+    let Ok(rt) = tokio::runtime::Builder::new_current_thread().enable_time().build() else {
+        // Without a timer, abort at once rather than risk waiting forever.
+        drop(handle);
+        return false;
+    };
+    // The timer is made inside the runtime, which it needs.
+    rt.block_on(async move { tokio::time::timeout(limit, handle.wait()).await.is_ok() })
 }
 
 /// Something done with a sample of the run every `period`.

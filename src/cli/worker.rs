@@ -48,7 +48,7 @@ pub(super) struct WorkerArgs {
     max_queued: usize,
     /// Longest one run may go on here, seconds; past it the run fails.
     /// Unbounded by default (a live robot streams for hours).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = super::numbers::positive_wait_secs)]
     max_run_secs: Option<f64>,
     /// With mutual TLS: take plans only from the coordinator whose
     /// certificate has this common name (repeatable; with none of these
@@ -176,7 +176,7 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
             let limits = limits.clone();
             let verifier = verifier.clone();
             let hosting = tokio::task::spawn_blocking(move || {
-                let registry = squall::builtin::registry();
+                let registry = crate::builtin::registry();
                 let authority = verifier.as_deref().zip(coordinator.as_deref());
                 let policy = HostPolicy { limits: &limits, authority };
                 host_run(&session, &plan, &registry, &reply, &options, policy, &release)
@@ -223,13 +223,23 @@ pub(super) fn worker(args: &WorkerArgs) -> ExitCode {
 fn worker_limits(args: &WorkerArgs) -> Result<WorkerLimits, String> {
     let max_run = match args.max_run_secs {
         None => None,
-        Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
-        Some(s) => return Err(format!("--max-run-secs {s}: expected a number of seconds > 0")),
+        Some(s) => {
+            Some(squall_topology::bounds::wait_secs("--max-run-secs", s, false).map_err(|e| e.to_string())?)
+        }
     };
     let max_memory = match args.max_memory_mb {
         None => WorkerLimits::default().max_memory,
-        Some(0) => return Err("--max-memory-mb 0: expected a number of MiB > 0".into()),
-        Some(mb) => Some(mb << 20),
+        Some(mb) => Some(
+            squall_topology::bounds::count(
+                "--max-memory-mb",
+                mb,
+                1,
+                u64::MAX >> 20,
+                "MiB, counted in bytes in 64 bits",
+            )
+            .map_err(|e| e.to_string())?
+                << 20,
+        ),
     };
     if args.max_tasks == 0 {
         return Err("--max-tasks 0: expected at least 1".into());

@@ -10,6 +10,11 @@ usage:
       {topic: {schema, encoding, messages, bytes}} as JSON.
   foxglove_check.py mcap FILE.mcap
       prints the same for a recorded file, from its summary and messages.
+  foxglove_check.py stall ws://HOST:PORT SECS
+      a viewer that stops reading: subscribes to every channel advertised
+      in its first second, then reads nothing for SECS seconds, the
+      connection held open (it answers no close, and its socket's small
+      buffers fill). Prints "subscribed N".
 """
 
 import asyncio
@@ -69,6 +74,68 @@ async def live(url, wanted):
         sys.exit(f"no messages on {missing}")
 
 
+def stall(url, secs):
+    """A client of raw sockets, so that nothing reads for it: the
+    WebSocket handshake, the first frames (the advertisements), one
+    subscribe per channel, then silence, the socket open."""
+    import base64
+    import os
+    import socket
+    import urllib.parse
+
+    parts = urllib.parse.urlparse(url)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect((parts.hostname, parts.port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET / HTTP/1.1\r\nHost: {parts.netloc}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                  f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+                  f"Sec-WebSocket-Protocol: {SUBPROTOCOL}\r\n\r\n").encode())
+    buffer = b""
+    while b"\r\n\r\n" not in buffer:
+        buffer += sock.recv(4096)
+    buffer = buffer.split(b"\r\n\r\n", 1)[1]
+
+    def send_text(text):
+        payload = text.encode()
+        mask = os.urandom(4)
+        header = bytes([0x81])
+        if len(payload) < 126:
+            header += bytes([0x80 | len(payload)])
+        else:
+            header += bytes([0x80 | 126]) + struct.pack(">H", len(payload))
+        sock.sendall(header + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
+
+    subscribed = 0
+    sock.settimeout(0.2)
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        try:
+            buffer += sock.recv(65536)
+        except socket.timeout:
+            pass
+        while len(buffer) >= 2:
+            opcode, length, at = buffer[0] & 0x0F, buffer[1] & 0x7F, 2
+            if length == 126:
+                if len(buffer) < 4:
+                    break
+                length, at = struct.unpack_from(">H", buffer, 2)[0], 4
+            elif length == 127:
+                if len(buffer) < 10:
+                    break
+                length, at = struct.unpack_from(">Q", buffer, 2)[0], 10
+            if len(buffer) < at + length:
+                break
+            frame, buffer = buffer[at:at + length], buffer[at + length:]
+            if opcode == 0x1 and json.loads(frame).get("op") == "advertise":
+                channels = json.loads(frame)["channels"]
+                subscriptions = [{"id": subscribed + i + 1, "channelId": c["id"]} for i, c in enumerate(channels)]
+                subscribed += len(subscriptions)
+                send_text(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
+    print(f"subscribed {subscribed}", flush=True)
+    time.sleep(secs)
+
+
 def recorded(path):
     from mcap.reader import make_reader
 
@@ -100,5 +167,7 @@ if __name__ == "__main__":
         asyncio.run(live(sys.argv[2], sys.argv[3:]))
     elif len(sys.argv) == 3 and sys.argv[1] == "mcap":
         recorded(sys.argv[2])
+    elif len(sys.argv) == 4 and sys.argv[1] == "stall":
+        stall(sys.argv[2], float(sys.argv[3]))
     else:
         sys.exit(__doc__)

@@ -136,3 +136,14 @@ pub(crate) fn relation_error(trajectory: &std::path::Path, relations: &std::path
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     report["trans_mean"].as_f64().unwrap_or_else(|| panic!("{report}"))
 }
+
+/// Whether process `pid` has installed a handler for signal `number`
+/// (its bit in the caught-signals mask of Linux's /proc/PID/status).
+pub(crate) fn catches(pid: u32, number: u32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1 << (number - 1)) != 0)
+}

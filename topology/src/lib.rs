@@ -15,6 +15,7 @@
 //! - a panic names its component and fails the run (or restarts the task);
 //! - opt-in acking replays failed or timed-out spout tuples.
 
+pub mod bounds;
 pub mod cluster;
 mod component;
 pub mod confine;

@@ -2,6 +2,7 @@
 
 use serde::de::DeserializeOwned;
 
+use crate::bounds::MemoryBudget;
 use crate::error::ParamError;
 
 /// The `params` of one component, handed to its factory.
@@ -10,12 +11,27 @@ pub struct Params {
     table: toml::Table,
     seed: u64,
     parallelism: usize,
+    budget: MemoryBudget,
 }
 
 impl Params {
     /// Params from a TOML table.
     pub fn new(table: toml::Table, seed: u64, parallelism: usize) -> Self {
-        Params { table, seed, parallelism }
+        Params { table, seed, parallelism, budget: MemoryBudget::default() }
+    }
+
+    /// The same params with the run's memory budget, against which a
+    /// factory checks what its structures would take before the run
+    /// (validation gives every component the topology's).
+    pub fn with_budget(mut self, budget: MemoryBudget) -> Self {
+        self.budget = budget;
+        self
+    }
+
+    /// The run's memory budget (no limit unless [`Params::with_budget`]
+    /// set one).
+    pub fn budget(&self) -> MemoryBudget {
+        self.budget
     }
 
     /// Deserializes the table into the component's parameter struct. Use

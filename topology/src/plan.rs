@@ -201,7 +201,8 @@ fn instantiate(
     errors: &mut Vec<SpecError>,
 ) -> Option<Planned> {
     let at = Some((c.role, c.name.as_str()));
-    let params = Params::new(c.params.clone(), spec.seed, c.parallelism);
+    let params = Params::new(c.params.clone(), spec.seed, c.parallelism)
+        .with_budget(crate::bounds::MemoryBudget::for_run(spec.memory_limit));
     let mut declared = Declarer::default();
     let factory = match c.role {
         Role::Spout => registry.spout(&c.kind).map(|f| Factory::Spout(f.clone())),

@@ -33,6 +33,21 @@ pub struct SceneGrid {
 }
 
 impl SceneGrid {
+    /// The grid's width and height in cells over `map` at `cell` metres,
+    /// and the bytes building it takes before any wall is listed: a
+    /// scene list header per cell while the rows are computed, and an
+    /// offset per cell. (The walls listed add to that; near walls, the
+    /// 3 × 3 unions several times a cell's own.) Sizes saturate rather
+    /// than overflow, for any map.
+    pub fn size_before_scenes(map: &LineMap, cell: Real) -> (usize, usize, f64) {
+        let (x0, y0, x1, y1) = map.bounds();
+        // `as` saturates: an extent of 1e300 cells is usize::MAX.
+        let width = (((x1 - x0) / cell).ceil() as usize).max(1);
+        let height = (((y1 - y0) / cell).ceil() as usize).max(1);
+        let per_cell = (std::mem::size_of::<Vec<u32>>() + std::mem::size_of::<u32>()) as f64;
+        (width, height, width as f64 * height as f64 * per_cell)
+    }
+
     /// Computes the scene at every cell centre of a `cell`-metre grid over
     /// the map's bounding box, walls up to `range` metres, on `threads`
     /// threads; a cell within 1.5 cells of a wall keeps the union of its
@@ -41,15 +56,26 @@ impl SceneGrid {
     pub fn build(map: &LineMap, cell: Real, range: Real, threads: usize) -> crate::Result<Self> {
         crate::error::positive("cell", cell)?;
         crate::error::positive("range", range)?;
-        let (x0, y0, x1, y1) = map.bounds();
-        let width = (((x1 - x0) / cell).ceil() as usize).max(1);
-        let height = (((y1 - y0) / cell).ceil() as usize).max(1);
+        let (width, height, _) = Self::size_before_scenes(map, cell);
+        if width.saturating_mul(height) >= u32::MAX as usize {
+            return Err(crate::Error::Setting(format!(
+                "a scene grid of {width} × {height} cells of {cell} m has more cells than its index \
+                 counts (2³²): raise cell"
+            )));
+        }
+        let (x0, y0, _, _) = map.bounds();
         let threads = threads.clamp(1, height);
         let rows_per = height.div_ceil(threads);
         let centre_of = |i: usize, j: usize| (x0 + (i as Real + 0.5) * cell, y0 + (j as Real + 0.5) * cell);
+        // A signal during the build (seconds on a large map) ends it: the
+        // rows left are not computed and the build is an error.
+        let stop = squall_topology::runtime::process_stop();
         let row_scenes = |rows: std::ops::Range<usize>| -> Vec<Vec<u32>> {
             let mut out = Vec::with_capacity(rows.len() * width);
             for j in rows {
+                if stop.is_made() {
+                    break;
+                }
                 for i in 0..width {
                     let mut ids: Vec<u32> =
                         observable_scene(map, centre_of(i, j), range).iter().map(|v| v.line).collect();
@@ -70,6 +96,11 @@ impl SceneGrid {
             handles.into_iter().map(|h| h.join().expect("a scene thread panicked")).collect()
         });
         let centres: Vec<Vec<u32>> = chunks.into_iter().flatten().collect();
+        if centres.len() < width * height {
+            return Err(crate::Error::Setting(
+                "stopped (Ctrl-C or SIGTERM) while observable scenes were built".into(),
+            ));
+        }
         // A cell next to a wall keeps what its own and its eight
         // neighbours' centres see: a robot beside a door jamb, whose cell
         // centre lies across the wall, still finds the walls of its own
@@ -92,7 +123,7 @@ impl SceneGrid {
                 });
                 if !by_a_wall {
                     lines.extend_from_slice(own);
-                    offsets.push(lines.len() as u32);
+                    offsets.push(offset(lines.len())?);
                     continue;
                 }
                 for nj in j.saturating_sub(1)..(j + 2).min(height) {
@@ -103,7 +134,7 @@ impl SceneGrid {
                 ids.sort_unstable();
                 ids.dedup();
                 lines.extend_from_slice(&ids);
-                offsets.push(lines.len() as u32);
+                offsets.push(offset(lines.len())?);
             }
         }
         Ok(SceneGrid {
@@ -187,6 +218,17 @@ impl SceneGrid {
     pub fn entries(&self) -> usize {
         self.lines.len()
     }
+}
+
+/// The offset of a cell's list in the wall ids, which the grid stores as
+/// `u32`: an error past 2³² ids (hundreds of millions of cells, each
+/// seeing many walls) rather than a wrapped index.
+fn offset(len: usize) -> crate::Result<u32> {
+    u32::try_from(len).map_err(|_| {
+        crate::Error::Setting(format!(
+            "the scene grid lists {len} wall ids, past the 2³² its index counts: raise cell"
+        ))
+    })
 }
 
 #[cfg(test)]

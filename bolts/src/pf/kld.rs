@@ -62,7 +62,7 @@ impl Kld {
     pub fn check(&self) -> crate::Result<()> {
         if self.min == 0 || self.min > self.max {
             return Err(crate::Error::Setting(format!(
-                "KLD-sampling needs 1 ≤ min ≤ max particles, got {} and {}",
+                "KLD-sampling needs 1 ≤ min_particles ≤ particles, got {} and {}",
                 self.min, self.max
             )));
         }

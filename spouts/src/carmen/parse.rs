@@ -104,6 +104,15 @@ pub enum RecordError {
         /// Readings found.
         found: usize,
     },
+    /// A scan whose geometry no laser has (see
+    /// [`LaserReading::check_geometry`]).
+    #[error("{keyword}: {message}")]
+    Geometry {
+        /// The message type.
+        keyword: String,
+        /// What is wrong.
+        message: String,
+    },
     /// A `PARAM` line without both a name and a value.
     #[error("PARAM needs a name and a value")]
     ParamIncomplete,
@@ -279,6 +288,13 @@ impl<'a> Fields<'a> {
         })
     }
 
+    /// The scan, if its geometry is one a laser can have.
+    fn checked(&self, scan: LaserReading) -> Result<LaserReading, RecordError> {
+        scan.check_geometry()
+            .map_err(|message| RecordError::Geometry { keyword: self.keyword.to_string(), message })?;
+        Ok(scan)
+    }
+
     fn flaser(&self, geometry: &Geometry, default_range_max: Real) -> Result<LaserReading, RecordError> {
         let n = self.count(0, "num_readings")?;
         if n < 2 {
@@ -290,7 +306,7 @@ impl<'a> Fields<'a> {
         let ranges = self.ranges(1, n)?;
         let laser = self.pose(n + 1, "the laser pose")?;
         let odometry = self.pose(n + 4, "the odometry pose")?;
-        Ok(LaserReading {
+        self.checked(LaserReading {
             stamp: self.num(n + 7, "ipc_timestamp")?,
             ranges,
             angle_min: geometry.angle_min.unwrap_or(-PI / 2.0),
@@ -317,7 +333,7 @@ impl<'a> Fields<'a> {
         let at = 8 + n + 1 + m;
         let laser = self.pose(at, "the laser pose")?;
         let odometry = self.pose(at + 3, "the robot pose")?;
-        Ok(LaserReading {
+        self.checked(LaserReading {
             stamp: self.num(at + 11, "ipc_timestamp")?,
             ranges,
             angle_min: start_angle,
@@ -398,6 +414,31 @@ mod tests {
         assert_eq!(e.to_string(), "ROBOTLASER1: missing num_remissions (line cut off?)");
         let e = p.parse(&format!("ROBOTLASER1 0 0 0 0 0 0 0 1 5 {max} 0 0 0")).unwrap_err().to_string();
         assert!(e.contains(&format!("with 1 readings and {max} remissions needs")), "{e}");
+    }
+
+    #[test]
+    fn a_scan_no_laser_could_make_is_an_error_naming_it() {
+        let flaser = |n: usize| {
+            let ranges = vec!["1.0"; n].join(" ");
+            format!("FLASER {n} {ranges} 0 0 0 0 0 0 1.0 h 1.0")
+        };
+        let mut p = LineParser::new(80.0);
+        assert!(p.parse(&flaser(65536)).is_ok(), "the most beams a scan may have");
+        let e = p.parse(&flaser(65537)).unwrap_err().to_string();
+        assert_eq!(e, "FLASER: 65537 beams: expected at most 65536 (no laser has more)");
+        // Beams 3 rad apart: 360 of them wind round 171 times.
+        p.parse("PARAM laser_front_laser_angle_increment 3.0 h 0").unwrap();
+        let e = p.parse(&flaser(360)).unwrap_err().to_string();
+        assert!(
+            e.starts_with("FLASER: 360 beams 3 rad apart span 171.4 turns: expected at most one turn"),
+            "{e}"
+        );
+        let robot = |step: f64| {
+            format!("ROBOTLASER1 0 -1.5 3.1 {step} 80 0 0 4 1 1 1 1 0 {} 1.0 h 1.0", ["0"; 11].join(" "))
+        };
+        assert!(p.parse(&robot(2.0)).is_ok(), "4 beams 2 rad apart: within a turn");
+        let e = p.parse(&robot(3.1)).unwrap_err().to_string();
+        assert!(e.starts_with("ROBOTLASER1: 4 beams 3.1 rad apart span 1.5 turns"), "{e}");
     }
 
     #[test]

@@ -65,6 +65,10 @@ pub enum CdrError {
         /// Bytes left in the message.
         left: usize,
     },
+    /// A scan whose geometry no laser has (see
+    /// `LaserReading::check_geometry`).
+    #[error("LaserScan: {0}")]
+    ScanGeometry(String),
 }
 
 /// What went wrong decoding.

@@ -5,9 +5,9 @@
 //! `tf2_msgs/msg/TFMessage`.
 
 use squall_core::geometry::Pose2;
-use squall_core::sensor::{LaserReading, Odometry};
+use squall_core::sensor::{LaserReading, Odometry, check_scan_geometry};
 
-use super::cdr::{Cdr, CdrResult, CdrWriter};
+use super::cdr::{Cdr, CdrError, CdrResult, CdrWriter};
 
 /// `std_msgs/Header`: stamp (s) and frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -86,6 +86,8 @@ pub fn laser_scan(bytes: &[u8]) -> CdrResult<LaserScan> {
     let range_max = c.f32("range_max")?;
     let ranges = c.f32_seq("ranges")?;
     let _intensities = c.f32_seq("intensities")?;
+    check_scan_geometry(ranges.len(), f64::from(angle_min), f64::from(angle_increment))
+        .map_err(CdrError::ScanGeometry)?;
     Ok(LaserScan { header, angle_min, angle_increment, range_min, range_max, ranges })
 }
 

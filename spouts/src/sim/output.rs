@@ -41,7 +41,11 @@ pub fn write_run(sim: Simulation, dir: &Path) -> Result<SimSummary> {
     let mut clf = String::new();
     let mut truth = Trajectory::default();
     let mut header_written = false;
+    let stop = squall_topology::runtime::process_stop();
     for event in sim {
+        if stop.is_made() {
+            return Err(Error::Stopped);
+        }
         match event {
             SimEvent::Scan(scan, true_pose) => {
                 if !header_written {

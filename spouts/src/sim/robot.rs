@@ -3,6 +3,7 @@
 //! least, so routes close loops), a laser by ray casting, and wheel odometry
 //! with a systematic scale and heading bias plus random noise.
 
+use squall_topology::bounds::{MAX_BEAMS, MAX_SIM_SECS};
 use std::collections::{HashMap, VecDeque};
 use std::f64::consts::PI;
 
@@ -213,10 +214,10 @@ impl SimConfig {
     /// Checks every setting's range; says which is wrong.
     pub fn check(&self) -> Result<()> {
         let positive = |v: Real| v.is_finite() && v > 0.0;
-        if !positive(self.duration_secs) {
+        if !(positive(self.duration_secs) && self.duration_secs <= MAX_SIM_SECS) {
             return Err(Error::Duration(self.duration_secs));
         }
-        if self.beams < 2 {
+        if !(2..=MAX_BEAMS).contains(&self.beams) {
             return Err(Error::Beams(self.beams));
         }
         if !(positive(self.fov) && self.fov <= 2.0 * PI) {
@@ -697,8 +698,11 @@ mod tests {
     fn a_bad_setting_says_which() {
         let c = SimConfig::default();
         let e = |c: SimConfig| c.check().unwrap_err().to_string();
-        assert_eq!(e(SimConfig { duration_secs: 0.0, ..c.clone() }), "duration must be > 0 s, got 0");
-        assert_eq!(e(SimConfig { beams: 1, ..c.clone() }), "beams must be at least 2, got 1");
+        let duration = "duration_secs must be > 0 s and at most 1000000000 s (stamps keep a microsecond's resolution), got";
+        assert_eq!(e(SimConfig { duration_secs: 0.0, ..c.clone() }), format!("{duration} 0"));
+        assert_eq!(e(SimConfig { duration_secs: 1e300, ..c.clone() }), format!("{duration} 1e300"));
+        assert_eq!(e(SimConfig { beams: 1, ..c.clone() }), "beams must be in 2..=65536, got 1");
+        assert_eq!(e(SimConfig { beams: 1 << 20, ..c.clone() }), "beams must be in 2..=65536, got 1048576");
         assert_eq!(e(SimConfig { fov: 0.0, ..c.clone() }), "field of view must be in (0°, 360°], got 0°");
         assert_eq!(
             e(SimConfig { dropout: 1.5, ..c.clone() }),

@@ -251,6 +251,10 @@ pub(super) fn study(plan: &Plan) -> ExitCode {
         return ExitCode::from(EXIT_FAILED);
     }
     let failed = rows.iter().filter(|r| !r.error.is_empty()).count();
+    if crate::cli::signals::stopping() {
+        eprintln!("error: the study was stopped (Ctrl-C or SIGTERM): study.csv marks the runs it cut short");
+        return ExitCode::from(EXIT_FAILED);
+    }
     if failed > 0 {
         eprintln!(
             "error: {failed} of {} runs failed to run (see study.csv and runs/*/stderr.log)",
@@ -298,7 +302,10 @@ fn row_of(cell: Cell, job: &Job, outcome: Result<Measured, String>) -> Row {
     match outcome {
         Err(e) => row.error = e,
         Ok(m) => {
-            if let Some(e) = &m.failure {
+            if m.stopped {
+                // Part of the run at most: never scored, never a success.
+                row.error = m.failure.clone().unwrap_or_else(|| "stopped early (Ctrl-C or SIGTERM)".into());
+            } else if let Some(e) = &m.failure {
                 row.error.clone_from(e);
             } else {
                 match read_score(&job.dir.join("metrics.json")) {

@@ -67,10 +67,10 @@ pub(super) struct StudyArgs {
     )]
     modes: Vec<localization::Mode>,
     /// With `--maps`: simulated seconds per run.
-    #[arg(long, value_name = "S", default_value_t = 20.0, requires = "maps")]
+    #[arg(long, value_name = "S", default_value_t = 20.0, requires = "maps", value_parser = crate::cli::numbers::sim_secs)]
     duration: f64,
     /// With `--maps`: when kidnap runs are carried, seconds.
-    #[arg(long, value_name = "S", default_value_t = 8.0, requires = "maps")]
+    #[arg(long, value_name = "S", default_value_t = 8.0, requires = "maps", value_parser = crate::cli::numbers::sim_instant)]
     kidnap_at: f64,
     /// Simulated worlds to study as well, comma-separated: `office`,
     /// `campus` (a large open site, 80 m laser) or line-map files. Each
@@ -82,27 +82,27 @@ pub(super) struct StudyArgs {
     #[arg(long, value_name = "good|poor|bad", value_delimiter = ',', default_value = "poor")]
     odometry: Vec<squall_spouts::sim::OdometryQuality>,
     /// Simulated seconds per world.
-    #[arg(long, value_name = "S", default_value_t = 600.0)]
+    #[arg(long, value_name = "S", default_value_t = 600.0, value_parser = crate::cli::numbers::sim_secs)]
     sim_duration: f64,
     /// Seeds: single seeds and inclusive ranges, comma-separated, e.g.
     /// `1-10`, `1,2,5` or `1-3,7`.
     #[arg(long, value_name = "LIST", value_parser = parse_seeds)]
     seeds: Seeds,
     /// Particles (as in `squall slam`).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::numbers::positive_count)]
     particles: Option<u64>,
     /// Pose evaluations per particle per reading: a number or `none`.
-    #[arg(long, value_name = "N|none")]
+    #[arg(long, value_name = "N|none", value_parser = crate::cli::numbers::cutoff)]
     cutoff: Option<String>,
     /// Stop each run after this many scans (the odometry is then scored
     /// on the same first scans).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::numbers::positive_count)]
     max_scans: Option<u64>,
     /// Override any value of every run (as in `squall run`). Repeatable.
     #[arg(long = "set", value_name = "PATH=VALUE", value_parser = checked_override)]
     overrides: Vec<String>,
     /// Runs at once. The default is the number of cores.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::numbers::tasks)]
     jobs: Option<usize>,
     /// Output folder: study.csv, study.md, study.svg and runs/<log>-s<seed>.
     #[arg(long, value_name = "DIR")]
@@ -117,10 +117,9 @@ struct Seeds(Vec<u64>);
 /// ascending; a seed given twice runs once.
 fn parse_seeds(s: &str) -> Result<Seeds, String> {
     let mut seeds = Vec::new();
+    let mut seen = std::collections::HashSet::new();
     for part in s.split(',').map(str::trim) {
-        let number = |t: &str| {
-            t.trim().parse::<u64>().map_err(|_| format!("\"{t}\" is not a seed (a whole number ≥ 0)"))
-        };
+        let number = |t: &str| crate::cli::numbers::seed(t).map_err(|e| format!("seed \"{t}\": {e}"));
         let (from, to) = match part.split_once('-') {
             Some((a, b)) => (number(a)?, number(b)?),
             None => (number(part)?, number(part)?),
@@ -132,7 +131,7 @@ fn parse_seeds(s: &str) -> Result<Seeds, String> {
             return Err(format!("the range {part} has more than 100000 seeds"));
         }
         for seed in from..=to {
-            if !seeds.contains(&seed) {
+            if seen.insert(seed) {
                 seeds.push(seed);
             }
         }
@@ -201,6 +200,8 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
         });
         match written {
             Ok(log) => logs.push(log),
+            // Stopped while simulating: the runs are marked not started.
+            Err(_) if super::signals::stopping() => break,
             Err(message) => {
                 eprintln!("error: {message}");
                 return ExitCode::from(EXIT_FAILED);
@@ -231,6 +232,15 @@ pub(super) fn study(args: &StudyArgs) -> ExitCode {
         .and_then(|()| write_atomic(&args.out.join("study.svg"), svg::plot(&summaries, &rows).as_bytes()));
     if let Err(e) = written {
         eprintln!("error: cannot write to {}: {e}", args.out.display());
+        return ExitCode::from(EXIT_FAILED);
+    }
+    let stopped = rows.iter().filter(|r| r.status == Status::Stopped).count();
+    if stopped > 0 || super::signals::stopping() {
+        eprintln!(
+            "error: the study was stopped (Ctrl-C or SIGTERM): {stopped} of {} runs stopped early or not \
+             started (study.csv marks them)",
+            rows.len()
+        );
         return ExitCode::from(EXIT_FAILED);
     }
     let failed = rows.iter().filter(|r| r.status == Status::Failed).count();
@@ -407,6 +417,7 @@ fn run_all(jobs: &[Job], logs: &[Log], odometry: &[Option<Accuracy>], threads: u
         }
         let line = match (&row.status, row.accuracy) {
             (Status::Failed, _) => format!("{}: failed: {}", job.dir.display(), row.error),
+            (Status::Stopped, _) => format!("{}: stopped: {}", job.dir.display(), row.error),
             (Status::Ok, Some(a)) => format!("{}: {:.4} m", job.dir.display(), a.trans_m),
             (Status::Ok, None) => format!("{}: ok (no relations)", job.dir.display()),
         };
@@ -451,11 +462,20 @@ fn row_of(job: &Job, log: &Log, odometry: Option<Accuracy>, outcome: Result<Meas
     let measured = match outcome {
         Ok(m) => m,
         Err(e) => {
+            if e == runner::NOT_STARTED {
+                row.status = Status::Stopped;
+            }
             row.error = e;
             return row;
         }
     };
     row.measured = Some(measured.clone());
+    if measured.stopped {
+        // Part of the log at most: never scored, never "ok".
+        row.status = Status::Stopped;
+        row.error = measured.failure.unwrap_or_else(|| "stopped early (Ctrl-C or SIGTERM)".into());
+        return row;
+    }
     if let Some(e) = measured.failure {
         row.error = e;
         return row;

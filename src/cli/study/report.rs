@@ -14,6 +14,9 @@ pub(super) enum Status {
     Ok,
     /// It exited otherwise, or left no usable trajectory.
     Failed,
+    /// The study was stopped (Ctrl-C or SIGTERM) while it ran or before
+    /// it started: it covers part of its log, or none, and is not scored.
+    Stopped,
 }
 
 /// One (log, seed).
@@ -52,6 +55,8 @@ pub(super) struct Summary {
     /// Runs of this log (one per seed), failed ones included.
     pub(super) runs: usize,
     pub(super) failures: usize,
+    /// Runs stopped early or never started (the study was stopped).
+    pub(super) stopped: usize,
     /// Translational errors of the scored runs, ascending.
     pub(super) errors_m: Vec<f64>,
     pub(super) median_span_0_10_m: Option<f64>,
@@ -105,6 +110,7 @@ pub(super) fn summarize(logs: &[PathBuf], rows: &[Row], odometry: &[Option<Accur
                 log,
                 runs: mine.len(),
                 failures: mine.iter().filter(|r| r.status == Status::Failed).count(),
+                stopped: mine.iter().filter(|r| r.status == Status::Stopped).count(),
                 errors_m,
                 median_span_0_10_m: median(&spans),
                 odometry,
@@ -141,6 +147,7 @@ pub(super) fn csv(rows: &[Row]) -> String {
             match r.status {
                 Status::Ok => "ok".into(),
                 Status::Failed => "failed".into(),
+                Status::Stopped => "stopped".into(),
             },
             csv_field(&r.error),
             number(r.accuracy.map(|a| a.trans_m), 6),
@@ -165,7 +172,17 @@ pub(super) fn markdown(command: &str, summaries: &[Summary]) -> String {
     let mut t = String::from("# squall study\n\n");
     let _ = writeln!(t, "- command: `{command}`");
     let _ = writeln!(t, "- squall {}", env!("CARGO_PKG_VERSION"));
-    let _ = writeln!(t, "- date: {} (UTC)\n", today_utc());
+    let _ = writeln!(t, "- date: {} (UTC)", today_utc());
+    let stopped: usize = summaries.iter().map(|s| s.stopped).sum();
+    if stopped > 0 {
+        let runs: usize = summaries.iter().map(|s| s.runs).sum();
+        let _ = writeln!(
+            t,
+            "- **stopped** (Ctrl-C or SIGTERM): {stopped} of {runs} runs were stopped early or never \
+             started, and are not scored; study.csv marks them"
+        );
+    }
+    t.push('\n');
     t.push_str(
         "Translational errors in metres (relation metric); \"0–10 s\" is the error of the relations \
          spanning under 10 s; \"worse\" counts runs whose error exceeds the raw odometry's.\n\n",

@@ -10,7 +10,7 @@
 use std::ffi::OsString;
 use std::fs::File;
 use std::io;
-use std::os::unix::process::ExitStatusExt;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::Instant;
@@ -38,10 +38,19 @@ pub(super) struct Measured {
     pub(super) peak_rss_mb: f64,
     /// Why the run failed (its last stderr line), `None` when it exited 0.
     pub(super) failure: Option<String>,
+    /// Whether it was stopped early (the study was signalled, or its
+    /// metrics.json says "stopped"): its outputs cover part of the log.
+    pub(super) stopped: bool,
 }
+
+/// The error of a job the study never started, having been stopped.
+pub(super) const NOT_STARTED: &str = "not started: the study was stopped (Ctrl-C or SIGTERM)";
 
 /// Runs `job` to its end. `Err` when it could not even start.
 pub(super) fn run(job: &Job) -> Result<Measured, String> {
+    if crate::cli::signals::stopping() {
+        return Err(NOT_STARTED.into());
+    }
     let cannot = |what: &str, e: io::Error| format!("cannot {what}: {e}");
     std::fs::create_dir_all(&job.dir).map_err(|e| cannot(&format!("create {}", job.dir.display()), e))?;
     let stderr_path = job.dir.join("stderr.log");
@@ -49,16 +58,28 @@ pub(super) fn run(job: &Job) -> Result<Measured, String> {
     let stderr = File::create(&stderr_path).map_err(|e| cannot("create stderr.log", e))?;
     let exe = std::env::current_exe().map_err(|e| cannot("find this executable", e))?;
     let started = Instant::now();
-    let child = Command::new(exe)
-        .args(&job.args)
-        .arg("--out")
-        .arg(&job.dir)
-        .stdin(Stdio::null())
-        .stdout(stdout)
-        .stderr(stderr)
-        .spawn()
-        .map_err(|e| cannot("start squall slam", e))?;
-    let (status, usage) = wait_with_usage(&child).map_err(|e| cannot("wait for squall slam", e))?;
+    let mut command = Command::new(exe);
+    command.args(&job.args).arg("--out").arg(&job.dir).stdin(Stdio::null()).stdout(stdout).stderr(stderr);
+    // SAFETY: between fork and exec the child calls only `setpgid` and
+    // `prctl`, which are async-signal-safe, and touches no memory.
+    unsafe {
+        command.pre_exec(|| {
+            // A process group of its own: Ctrl-C at the terminal reaches
+            // the study alone, which passes one SIGTERM on (a child that
+            // got both would take the second for "abort").
+            libc::setpgid(0, 0);
+            // Should the study die without passing a signal on (SIGKILL),
+            // the child is stopped rather than left running.
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+    let child = command.spawn().map_err(|e| cannot("start squall slam", e))?;
+    let pid = libc::pid_t::try_from(child.id()).map_err(|_| "pid out of range".to_string())?;
+    crate::cli::signals::adopt(pid);
+    let waited = wait_with_usage(&child);
+    crate::cli::signals::release(pid);
+    let (status, usage) = waited.map_err(|e| cannot("wait for squall slam", e))?;
     let wall_secs = started.elapsed().as_secs_f64();
     let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
     let failure = (!status.success()).then(|| {
@@ -77,7 +98,14 @@ pub(super) fn run(job: &Job) -> Result<Measured, String> {
         // Linux reports ru_maxrss in KiB.
         peak_rss_mb: reported_peak_rss_mb(&job.dir).unwrap_or(usage.ru_maxrss as f64 / 1024.0),
         failure,
+        stopped: crate::cli::signals::stopping() || reported_status(&job.dir).as_deref() == Some("stopped"),
     })
+}
+
+/// The status the run's `metrics.json` in `dir` reports.
+fn reported_status(dir: &std::path::Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("metrics.json")).ok()?;
+    Some(serde_json::from_str::<serde_json::Value>(&text).ok()?.get("status")?.as_str()?.to_string())
 }
 
 /// The peak memory the run's `metrics.json` in `dir` reports, MiB.

@@ -117,7 +117,7 @@ pub(super) fn plot(summaries: &[Summary], rows: &[Row]) -> String {
                         escape(&r.error)
                     );
                 }
-                (Status::Ok, None) => {}
+                (Status::Ok, None) | (Status::Stopped, _) => {}
             }
         }
     }

@@ -173,6 +173,8 @@ pub(crate) enum Failure {
     Task(TaskFailure),
     /// The process's resident memory (bytes) passed the limit (bytes).
     Memory { rss: u64, limit: u64 },
+    /// The run was stopped and had not drained after this long.
+    DrainTimedOut(std::time::Duration),
 }
 
 /// The task that failed a run, and why; the run's error names it.

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use crate::plan::Topology;
 use crate::runtime::control::{Event, EventKind, Failure, Stage, TaskFailure};
 use crate::runtime::memory;
+use crate::runtime::options::RunOptions;
 use crate::runtime::wiring::Wiring;
 use crate::spec::Role;
 
@@ -178,10 +179,25 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
     }
 
     /// Runs the shutdown protocol; returns the first failure, if any.
-    pub(crate) fn drive(&mut self, events: &mpsc::Receiver<Event>, grace: Duration) -> Option<Failure> {
+    /// A run whose stop was requested (`options.stop`) and that has not
+    /// drained within `options.stop_drain` is aborted.
+    pub(crate) fn drive(&mut self, events: &mpsc::Receiver<Event>, options: &RunOptions) -> Option<Failure> {
+        let grace = options.abort_grace;
         let order = &self.topology.order;
         let mut phase = Phase::Running;
+        let mut stopped_at: Option<Instant> = None;
         loop {
+            if stopped_at.is_none() && options.stop.is_made() {
+                stopped_at = Some(Instant::now());
+            }
+            if stopped_at.is_some_and(|at| at.elapsed() > options.stop_drain) {
+                tracing::warn!(
+                    "the stopped run did not drain within {:.0} s: aborting what is left",
+                    options.stop_drain.as_secs_f64()
+                );
+                self.abort(events, grace);
+                return Some(Failure::DrainTimedOut(options.stop_drain));
+            }
             match events.recv_timeout(POLL) {
                 Ok(Event { component, task, kind }) => match kind {
                     EventKind::SpoutDone => self.spouts_running -= 1,

@@ -25,7 +25,7 @@ pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunEr
     let (events_tx, events) = mpsc::channel();
     let threads = spawn_tasks(topology, &mut wiring, options, runtime.handle(), &events_tx, &|_, _| true)?;
     drop(events_tx);
-    let failure = Coordinator::new(topology, &wiring).drive(&events, options.abort_grace);
+    let failure = Coordinator::new(topology, &wiring).drive(&events, options);
     let outcomes = join_tasks(threads, failure.is_none())
         .into_iter()
         .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())

@@ -35,5 +35,5 @@ pub(crate) mod threads;
 pub(crate) mod wiring;
 
 pub use in_process::run;
-pub use options::{Progress, RunOptions, StopRequest};
+pub use options::{Progress, RunOptions, STOP_DRAIN, StopRequest, process_stop};
 pub use outcome::RunError;

@@ -38,6 +38,11 @@ pub struct RunOptions {
     /// then everything in flight is processed and every component finishes,
     /// as if the sources had ended (Ctrl-C in `squall run`).
     pub stop: Arc<StopRequest>,
+    /// How long the run may drain once `stop` is made; past it the tasks
+    /// are aborted, what they held counted as undelivered, and the run
+    /// ends with [`RunError::DrainTimedOut`](crate::RunError::DrainTimedOut).
+    /// The default is [`STOP_DRAIN`].
+    pub stop_drain: Duration,
     /// Publish the tasks' counters while the run goes, for a live page,
     /// a Prometheus scrape or a periodic metrics.json (none when absent).
     pub live: Option<Arc<crate::live::LiveRun>>,
@@ -81,6 +86,23 @@ impl StopRequest {
     }
 }
 
+/// The process's own stop request: what a signal handler makes on the
+/// first Ctrl-C or SIGTERM. A run given it (`RunOptions::stop`) stops as
+/// the request is made, and setup work that takes seconds before a run
+/// (building observable scenes, replaying a simulated route) polls
+/// [`StopRequest::is_made`] on it and gives up, so that a signal is
+/// honoured at every stage, not only once the run has started.
+pub fn process_stop() -> Arc<StopRequest> {
+    static STOP: OnceLock<Arc<StopRequest>> = OnceLock::new();
+    STOP.get_or_init(Default::default).clone()
+}
+
+/// How long a stopped run may take to drain (finish what its sources had
+/// sent) before what is left is abandoned: 10 s, several times the
+/// slowest scan match at the default settings. The default of
+/// [`RunOptions::stop_drain`].
+pub const STOP_DRAIN: Duration = Duration::from_secs(10);
+
 impl Default for RunOptions {
     fn default() -> Self {
         RunOptions {
@@ -88,6 +110,7 @@ impl Default for RunOptions {
             progress: None,
             abort_grace: Duration::from_secs(5),
             stop: Arc::new(StopRequest::default()),
+            stop_drain: STOP_DRAIN,
             live: None,
         }
     }

@@ -39,6 +39,20 @@ pub enum RunError {
         /// Metrics up to the failure.
         report: Box<RunReport>,
     },
+    /// The run was stopped (Ctrl-C, SIGTERM, [`RunOptions::stop`](crate::RunOptions::stop))
+    /// and had not drained within [`RunOptions::stop_drain`](crate::RunOptions::stop_drain):
+    /// the tasks were aborted, what they still held is counted as
+    /// undelivered.
+    #[error(
+        "stopped, and not drained within {secs} s: what was still in flight was abandoned \
+         (counted as undelivered)"
+    )]
+    DrainTimedOut {
+        /// The bound, seconds.
+        secs: f64,
+        /// Metrics up to the abort.
+        report: Box<RunReport>,
+    },
     /// The runtime itself could not start.
     #[error("cannot start the runtime: {0}")]
     Start(#[from] std::io::Error),
@@ -49,9 +63,9 @@ impl RunError {
     pub fn into_parts(self) -> (String, Option<RunReport>) {
         let message = self.to_string();
         match self {
-            RunError::TaskFailed { report, .. } | RunError::MemoryLimit { report, .. } => {
-                (message, Some(*report))
-            }
+            RunError::TaskFailed { report, .. }
+            | RunError::MemoryLimit { report, .. }
+            | RunError::DrainTimedOut { report, .. } => (message, Some(*report)),
             RunError::Start(_) => (message, None),
         }
     }
@@ -67,6 +81,9 @@ pub(crate) fn finish_run(
         None => Ok(report),
         Some(Failure::Memory { rss, limit }) => {
             Err(RunError::MemoryLimit { rss_mb: rss >> 20, limit_mb: limit >> 20, report: Box::new(report) })
+        }
+        Some(Failure::DrainTimedOut(bound)) => {
+            Err(RunError::DrainTimedOut { secs: bound.as_secs_f64(), report: Box::new(report) })
         }
         Some(Failure::Task(TaskFailure { component, task, message })) => {
             let spec = &topology.components[component].spec;

@@ -50,12 +50,20 @@ impl fmt::Display for SpecError {
 /// much was left out.
 const SHOWN: usize = 400;
 
-/// `text`, cut after [`SHOWN`] characters.
+/// Of those, the characters kept from the end, where a message says
+/// whose value it was (`in `particles``).
+const SHOWN_TAIL: usize = 100;
+
+/// `text`, its middle cut out past [`SHOWN`] characters.
 fn clipped(text: &str) -> std::borrow::Cow<'_, str> {
-    match text.char_indices().nth(SHOWN) {
-        None => text.into(),
-        Some((at, _)) => format!("{}… ({} more bytes)", &text[..at], text.len() - at).into(),
+    let chars = text.chars().count();
+    if chars <= SHOWN {
+        return text.into();
     }
+    let head_end = text.char_indices().nth(SHOWN - SHOWN_TAIL).map_or(text.len(), |(at, _)| at);
+    let tail_start = text.char_indices().nth(chars - SHOWN_TAIL).map_or(text.len(), |(at, _)| at);
+    let left_out = tail_start - head_end;
+    format!("{}… ({left_out} more bytes) …{}", &text[..head_end], &text[tail_start..]).into()
 }
 
 /// Every problem found in a topology (validation does not stop at the first).

@@ -53,8 +53,8 @@ pub const MAX_QUEUE: usize = 1 << 20;
 /// The most un-acked tuples a spout may keep.
 pub const MAX_PENDING: usize = 1 << 20;
 /// The longest tick period or ack timeout, seconds (a week): longer ones
-/// cannot be timed on every platform's clock.
-pub const MAX_PERIOD_SECS: f64 = 7.0 * 24.0 * 3600.0;
+/// cannot be timed on every platform's clock ([`crate::bounds::MAX_WAIT_SECS`]).
+pub const MAX_PERIOD_SECS: f64 = crate::bounds::MAX_WAIT_SECS;
 /// How long a bolt may stay inside one call without progress before the
 /// run fails: 5 minutes, a thousand times a slow scan match.
 pub const DEFAULT_STALL: Duration = Duration::from_secs(300);
@@ -255,7 +255,22 @@ impl TopologySpec {
         };
         let raw: RawFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(0, |s| source.line(s.start));
-            source.error_at_line(line, None, e.message().trim().to_string())
+            // toml's message says what the value should have been, not
+            // whose value it is: the key is the text before `=` on the
+            // line of the value.
+            let key = e
+                .span()
+                .and_then(|s| text.get(..s.start))
+                .and_then(|before| before.rsplit('\n').next())
+                .and_then(|l| l.split_once('='))
+                .map(|(k, _)| k.trim().trim_matches('"'))
+                .filter(|k| !k.is_empty() && !k.contains(['[', '{', ',']));
+            let message = e.message().trim();
+            let message = match key {
+                Some(key) => format!("{key}: {message}"),
+                None => message.to_string(),
+            };
+            source.error_at_line(line, None, message)
         })?;
         Ok(convert(raw, source, text.into()))
     }

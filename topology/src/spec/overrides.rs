@@ -96,6 +96,21 @@ pub struct Override {
     text: String,
 }
 
+impl Override {
+    /// The memory limit, bytes, the last `topology.memory_limit_mb=N` of
+    /// `overrides` sets (for checks a command makes before it builds the
+    /// topology); `None` if none sets a positive one.
+    pub fn memory_limit(overrides: &[Override]) -> Option<u64> {
+        overrides
+            .iter()
+            .rev()
+            .find(|o| o.path == ["topology", "memory_limit_mb"])
+            .and_then(|o| o.value.as_integer())
+            .and_then(|mb| u64::try_from(mb).ok())
+            .map(|mb| mb.saturating_mul(1 << 20))
+    }
+}
+
 impl FromStr for Override {
     type Err = OverrideError;
 

@@ -129,7 +129,7 @@ impl<M: HostedModel> Matcher<M> {
                 .and_then(|i| u64::try_from(i).ok())
                 .ok_or_else(|| ParamError::new(format!("map_interval must be a count ≥ 0, got {v}")))?,
         };
-        let model = M::from_table(table).map_err(ParamError::new)?;
+        let model = M::from_table(table, p.budget()).map_err(ParamError::new)?;
         Ok(Matcher {
             model,
             map_interval,

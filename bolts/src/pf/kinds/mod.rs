@@ -18,6 +18,7 @@ pub mod matcher;
 pub mod messages;
 pub mod resampler;
 
+use squall_topology::bounds::MemoryBudget;
 use squall_topology::{Message, MessageType, Registry};
 
 use crate::pf::ParticleModel;
@@ -33,8 +34,10 @@ pub trait HostedModel: ParticleModel<Input: Message, State: Message> + Sized {
     type Snapshot: Message;
 
     /// The model from a component's params (without `model` and
-    /// `map_interval`); errors name the wrong setting.
-    fn from_table(table: toml::Table) -> crate::Result<Self>;
+    /// `map_interval`); errors name the wrong setting. What its particles
+    /// and structures would take before the first reading is checked
+    /// against `budget` (the run's memory limit).
+    fn from_table(table: toml::Table, budget: MemoryBudget) -> crate::Result<Self>;
 
     /// The snapshot of a particle.
     fn snapshot(&self, state: &Self::State) -> Self::Snapshot;

@@ -171,7 +171,7 @@ fn coordinate(
         stash: Vec::new(),
         next_nonce: 1,
     };
-    let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options.abort_grace);
+    let failure = Coordinator::new(topology, &mut hosts_view).drive(&events, options);
     drop(traffic_stop);
     let ended = hosts_view.end();
     send_as_coordinator(session, &control, Control::Collect, signer).map_err(setup)?;
