@@ -243,7 +243,7 @@ fn what_would_not_fit_in_memory_is_refused_before_it_runs() {
     std::fs::write(&map, "0,0,10000,0\n10000,0,10000,10000\n10000,10000,0,10000\n0,10000,0,0\n").unwrap();
     refused_for_memory(
         &["localize", "--map", map.to_str().unwrap(), "--sim", "--out", out],
-        "observable scenes on a 50000 × 50000 grid",
+        "observable scenes on a 50000 × 50000 grid (cell = 0.2 m)",
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -269,5 +269,80 @@ fn a_score_that_overflows_is_an_error_not_inf() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("no finite score"), "{stderr}");
     assert!(!String::from_utf8_lossy(&out.stdout).contains("inf"), "no infinite score is printed");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The numeric keys of a settings struct, from its serialized defaults.
+fn numeric_fields<T: serde::Serialize>(defaults: &T) -> Vec<String> {
+    let table: toml::Table = toml::Table::try_from(defaults).unwrap();
+    table
+        .iter()
+        .filter(|(_, v)| matches!(v, toml::Value::Integer(_) | toml::Value::Float(_)))
+        .map(|(k, _)| k.clone())
+        .collect()
+}
+
+#[test]
+fn every_slam_and_cgr_setting_runs_or_is_refused() {
+    // Validation checks these settings; this runs each, at the values an
+    // adversary tries first, over a few readings, so what validation lets
+    // through is seen to run without a panic.
+    let dir = out_dir("settings");
+    let log = small_log(&dir);
+    let edsh = shared_data("linemaps/EDSH120_vector.txt");
+    let slam = numeric_fields(&squall::bolts::slam::options::SlamOptions::default());
+    let mut cgr = numeric_fields(&squall::bolts::cgr::measurement::CgrOptions::default());
+    // The CGR model's own settings, beside the measurement's.
+    cgr.extend(
+        ["particles", "min_particles", "resample_threshold", "cell", "alpha_slow", "alpha_fast", "min_drop"]
+            .into_iter()
+            .chain(["lost_share", "srr", "srt", "str", "stt", "inside_opening"])
+            .map(String::from),
+    );
+    assert!(slam.len() > 20 && cgr.len() > 20, "{slam:?} {cgr:?}");
+    let values = ["0", "-1", "nan", "1e300", "9223372036854775807", "5e-324"];
+    let mut cases: Vec<(Vec<String>, String)> = Vec::new();
+    for (i, key) in slam.iter().enumerate() {
+        for value in values {
+            let out = dir.join(format!("slam-{i}"));
+            let args =
+                ["slam", "--log", &log, "--max-scans", "30", "--quiet", "--out", out.to_str().unwrap()];
+            let mut args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+            args.extend(["--set".into(), format!("matcher.params.{key}={value}")]);
+            cases.push((args, key.clone()));
+        }
+    }
+    for (i, key) in cgr.iter().enumerate() {
+        for value in values {
+            let out = dir.join(format!("cgr-{i}"));
+            let args = [
+                "localize",
+                "--map",
+                &edsh,
+                "--sim",
+                "--duration",
+                "2",
+                "--quiet",
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            let mut args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+            args.extend(["--set".into(), format!("matcher.params.{key}={value}")]);
+            cases.push((args, key.clone()));
+        }
+    }
+    // Two at a time: the machine's two cores.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| {
+                while let Some((args, key)) =
+                    cases.get(next.fetch_add(1, std::sync::atomic::Ordering::SeqCst))
+                {
+                    check(args, key);
+                }
+            });
+        }
+    });
     let _ = std::fs::remove_dir_all(&dir);
 }

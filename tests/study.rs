@@ -170,7 +170,10 @@ fn bad_input_exits_2_before_any_run() {
             &["--logs", "short.clf", "--seeds", "1", "--set", "matcher.params.bogus=1"][..],
             "unknown field `bogus`",
         ),
-        (&["--logs", "short.clf", "--seeds", "1", "--jobs", "0"][..], "--jobs must be at least 1"),
+        (
+            &["--logs", "short.clf", "--seeds", "1", "--jobs", "0"][..],
+            "invalid value '0' for '--jobs <JOBS>'",
+        ),
     ] {
         let mut all = vec!["study"];
         all.extend_from_slice(args);

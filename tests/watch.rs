@@ -360,7 +360,7 @@ fn watching_flags_that_cannot_work_are_refused_before_the_run() {
         assert!(err.contains(says), "{args:?}: {err}");
     };
     refused(&["--metrics-every", "1"], "--metrics-every needs an output folder");
-    refused(&["--metrics-every", "0"], "0.1 or more");
+    refused(&["--metrics-every", "0"], "expected seconds in [0.1, 604800]");
     refused(&["--ui-linger", "5"], "--ui-linger keeps --ui or --foxglove up");
     refused(&["--foxglove", "8765"], "expected HOST:PORT");
     refused(&["--record", "/proc/run.mcap"], "--record /proc/run.mcap: cannot write there");

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A numeric setting outside its range.
-    #[error("{name} must be {expected}, got {found}")]
+    #[error("{name} must be {expected}, got {}", squall_topology::spec::readable_number(*.found))]
     OutOfRange {
         /// The setting.
         name: &'static str,

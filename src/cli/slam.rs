@@ -57,9 +57,6 @@ fn quoted(s: &str) -> String {
 
 fn overrides(args: &SlamArgs) -> Result<Vec<Override>, String> {
     let mut sets: Vec<String> = Vec::new();
-    if args.matchers == 0 {
-        return Err("--matchers must be at least 1".into());
-    }
     sets.push(format!("matcher.parallelism={}", args.matchers));
     let max_scans = args.max_scans.map_or(String::new(), |m| format!(", max_scans = {m}"));
     match &args.log {

@@ -220,6 +220,7 @@ pub(crate) fn cgr_model(table: toml::Table, budget: MemoryBudget) -> crate::Resu
     };
     cgr.check()?;
     crate::error::positive("cell", p.cell)?;
+    crate::error::non_negative("inside_opening", p.inside_opening)?;
     squall_topology::confine::check_read(&p.map)?;
     let map = Arc::new(LineMap::load(&p.map)?);
     let scenes = match p.scenes.as_str() {
@@ -228,8 +229,8 @@ pub(crate) fn cgr_model(table: toml::Table, budget: MemoryBudget) -> crate::Resu
             let (width, height, bytes) = SceneGrid::size_before_scenes(&map, p.cell);
             budget.check(
                 format!(
-                    "observable scenes on a {width} × {height} grid of {} m cells over the map ({})",
-                    p.cell,
+                    "observable scenes on a {width} × {height} grid (cell = {} m) over the map ({})",
+                    squall_topology::spec::readable_number(p.cell),
                     p.map.display()
                 ),
                 bytes,

@@ -122,6 +122,12 @@ impl CgrModel {
         if options.particles == 0 {
             return Err(crate::Error::Setting("particles must be at least 1".into()));
         }
+        if options.min_particles > options.particles {
+            return Err(crate::Error::Setting(format!(
+                "min_particles ({}) must be at most particles ({}): the fewest KLD-sampling keeps",
+                options.min_particles, options.particles
+            )));
+        }
         if options.min_particles < options.particles {
             let kld = Kld::new(options.min_particles, options.particles);
             kld.check()?;

@@ -159,10 +159,6 @@ struct Log {
 
 /// Runs `squall study`.
 pub(super) fn study(args: &StudyArgs) -> ExitCode {
-    if args.jobs == Some(0) {
-        eprintln!("error: --jobs must be at least 1");
-        return ExitCode::from(EXIT_INVALID);
-    }
     let threads = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     if !args.maps.is_empty() {
         return localization::study(&localization::Plan {
