@@ -206,6 +206,18 @@ fn the_live_page_shows_numbers_changing_in_headless_chromium() {
     interrupt(child, &dir);
 }
 
+/// The Foxglove view's address (`ws://HOST:PORT`), once the run in `dir`
+/// has printed it.
+fn foxglove_url(dir: &Path) -> String {
+    let url = || {
+        stderr(dir)
+            .lines()
+            .find_map(|l| Some(l.strip_prefix("Foxglove live view: ")?.split(' ').next()?.to_string()))
+    };
+    wait_for("the Foxglove view's address", Duration::from_secs(30), || url().is_some(), || stderr(dir));
+    url().unwrap()
+}
+
 /// `tests/clients/foxglove_check.py ARGS`'s JSON: topic → {schema,
 /// encoding, messages, bytes}.
 fn foxglove_check(args: &[&str], context: impl FnOnce() -> String) -> serde_json::Value {
@@ -252,12 +264,7 @@ fn the_foxglove_view_latches_every_topic_for_a_late_viewer_and_records_every_rea
         .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
         .spawn()
         .unwrap();
-    let url = || {
-        stderr(&dir)
-            .lines()
-            .find_map(|l| Some(l.strip_prefix("Foxglove live view: ")?.split(' ').next()?.to_string()))
-    };
-    wait_for("the Foxglove view's address", Duration::from_secs(30), || url().is_some(), || stderr(&dir));
+    let url = foxglove_url(&dir);
     // A viewer who joins after the run (the views linger) gets the latest
     // map, scan, pose and transforms at once, each exactly once: every
     // live channel is latched. (A viewer watching while the run goes gets
@@ -265,7 +272,6 @@ fn the_foxglove_view_latches_every_topic_for_a_late_viewer_and_records_every_rea
     // slow client falls behind: not a count a test can assert.)
     wait_for("the run's end", Duration::from_secs(120), || stderr(&dir).contains("stay up"), || stderr(&dir));
     let topics = ["/scan", "/map", "/pose", "/tf"];
-    let url = url().unwrap();
     let mut args = vec!["live", url.as_str()];
     args.extend(topics);
     let live = foxglove_check(&args, || stderr(&dir));
@@ -461,16 +467,11 @@ fn a_foxglove_viewer_that_stops_reading_is_dropped_not_awaited() {
         .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
         .spawn()
         .unwrap();
-    let url = || {
-        stderr(&dir)
-            .lines()
-            .find_map(|l| Some(l.strip_prefix("Foxglove live view: ")?.split(' ').next()?.to_string()))
-    };
-    wait_for("the Foxglove view's address", Duration::from_secs(30), || url().is_some(), || stderr(&dir));
+    let url = foxglove_url(&dir);
     let client = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/foxglove_check.py");
     let mut viewer = Command::new("python3")
         .arg(client)
-        .args(["stall", &url().unwrap(), "600"])
+        .args(["stall", &url, "600"])
         .stdout(Stdio::piped())
         .spawn()
         .unwrap();
