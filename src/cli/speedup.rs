@@ -127,13 +127,19 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
     matchers.sort_unstable();
     matchers.dedup();
     let mut rows = Vec::new();
-    for &particles in &args.particles {
+    'configurations: for &particles in &args.particles {
         for &k in &matchers {
             let places: &[bool] = if args.cluster.is_some() { &[false, true] } else { &[false] };
             for &on_cluster in places {
+                if super::signals::stopping() {
+                    break 'configurations;
+                }
                 let name = format!("p{particles}-k{k}{}", if on_cluster { "-cluster" } else { "" });
                 let dir = args.out.join(name);
                 let mut row = match run_one(args, particles, k, on_cluster, &dir) {
+                    // Stopped during the run: its figures cover part of
+                    // the log, and are left out.
+                    _ if super::signals::stopping() => break 'configurations,
                     Ok(row) => row,
                     Err((code, e)) => {
                         eprintln!("error: {particles} particles, {k} matchers: {e}");
@@ -153,12 +159,23 @@ pub(super) fn speedup(args: &SpeedupArgs) -> ExitCode {
             }
         }
     }
+    if rows.is_empty() {
+        eprintln!("error: stopped (Ctrl-C or SIGTERM) before a configuration was measured in full");
+        return ExitCode::from(EXIT_FAILED);
+    }
     let table = table(&rows, matchers[0]);
     out!("{table}");
     let written = write_atomic(&args.out.join("speedup.csv"), csv(&rows, matchers[0]).as_bytes())
         .and_then(|()| write_atomic(&args.out.join("speedup.svg"), svg(&rows, matchers[0]).as_bytes()));
     if let Err(e) = written {
         eprintln!("error: cannot write to {}: {e}", args.out.display());
+        return ExitCode::from(EXIT_FAILED);
+    }
+    if super::signals::stopping() {
+        eprintln!(
+            "error: stopped (Ctrl-C or SIGTERM): the table has the {} configurations measured in full",
+            rows.len()
+        );
         return ExitCode::from(EXIT_FAILED);
     }
     if rows.iter().any(|r| r.identical == Some(false)) {
@@ -193,7 +210,11 @@ fn run_one(
     };
     let topology =
         super::slam::topology(&slam).map_err(|_| (EXIT_INVALID, "invalid configuration".to_string()))?;
-    let options = RunOptions { out_dir: Some(dir.to_path_buf()), ..RunOptions::default() };
+    let options = RunOptions {
+        out_dir: Some(dir.to_path_buf()),
+        stop: squall_topology::runtime::process_stop(),
+        ..RunOptions::default()
+    };
     let report = match (&args.cluster, on_cluster) {
         (Some(file), true) => run_on_cluster(&topology, file, &options)?,
         _ => squall_topology::run(&topology, &options).map_err(|e| failed(e.to_string()))?,
