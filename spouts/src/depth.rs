@@ -132,17 +132,7 @@ impl DepthSimSpout {
                 readable_number(params.frame_hz)
             )));
         }
-        let frames = params.duration_secs * params.frame_hz;
-        p.budget()
-            .check(
-                format!(
-                    "a simulated run of {} s ({} frames of about {} bytes each in the run's outputs)",
-                    readable_number(params.duration_secs),
-                    readable_number(frames.ceil()),
-                    crate::sim::OUTPUT_BYTES_PER_SCAN
-                ),
-                frames * crate::sim::OUTPUT_BYTES_PER_SCAN as f64,
-            )
+        crate::sim::outputs_fit(p.budget(), params.duration_secs, params.frame_hz, "frames")
             .map_err(ParamError::new)?;
         let seed = params.seed.unwrap_or(p.seed());
         Ok(DepthSimSpout {

@@ -10,7 +10,7 @@ use squall_core::geometry::Pose2;
 use squall_core::trajectory::Trajectory;
 
 use squall_spouts::sim::{
-    Carry, Kidnap, OUTPUT_BYTES_PER_SCAN, SimConfig, SimEvent, Simulation, Start, floor_for, top_speed_for,
+    Carry, Kidnap, SimConfig, SimEvent, Simulation, Start, floor_for, outputs_fit, top_speed_for,
 };
 use squall_topology::bounds::MemoryBudget;
 use squall_topology::spec::readable_number;
@@ -245,19 +245,11 @@ struct Route {
 /// odometry. An error if the settings are out of range or no place of the
 /// map lies 5–20 m from where the robot is to be kidnapped.
 fn simulated_route(map: &str, start: Start, args: &LocalizeArgs) -> Result<Route, String> {
-    // The route's odometry, and the run's outputs, grow with its scans.
-    let scans = args.duration * SimConfig::default().scan_hz;
-    MemoryBudget::for_run(Override::memory_limit(&args.overrides))
-        .check(
-            format!(
-                "--duration {}: a simulated run of {} scans of about {OUTPUT_BYTES_PER_SCAN} bytes each in \
-                 the run's outputs",
-                readable_number(args.duration),
-                readable_number(scans.ceil())
-            ),
-            scans * OUTPUT_BYTES_PER_SCAN as f64,
-        )
-        .map_err(|e| e.to_string())?;
+    // The route's odometry, and the run's outputs, grow with its scans:
+    // checked before the replay, as the source's factory checks it later.
+    let budget = MemoryBudget::for_run(Override::memory_limit(&args.overrides));
+    outputs_fit(budget, args.duration, SimConfig::default().scan_hz, "scans")
+        .map_err(|e| format!("--duration {}: {e}", readable_number(args.duration)))?;
     let floor = floor_for(map, args.seed).map_err(|e| e.to_string())?;
     let kidnap = args.kidnap_at.map(|at_secs| Kidnap {
         at_secs,

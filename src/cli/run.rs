@@ -91,12 +91,12 @@ pub(super) fn run_scored(
     // ends "stopped", its warning saying what was abandoned.
     let mut drain_note = None;
     let result = match result {
-        Err(RunError::DrainTimedOut { secs, report }) => {
-            drain_note = Some(format!(
-                "stopped, and not drained within {secs} s: what was still in flight was abandoned \
-                 (counted as undelivered)"
-            ));
-            Ok(*report)
+        Err(e @ RunError::DrainTimedOut { .. }) => {
+            drain_note = Some(e.to_string());
+            match e {
+                RunError::DrainTimedOut { report, .. } => Ok(*report),
+                other => Err(other),
+            }
         }
         other => other,
     };

@@ -83,8 +83,10 @@ impl Topology {
         registry: &Registry,
     ) -> Result<Self, SpecErrors> {
         let mut components = Vec::new();
+        // Read once: the machine's memory, unless the topology sets a limit.
+        let budget = crate::bounds::MemoryBudget::for_run(spec.memory_limit);
         for c in &spec.components {
-            if let Some(p) = instantiate(&spec, c, registry, &mut errors) {
+            if let Some(p) = instantiate(&spec, c, registry, budget, &mut errors) {
                 components.push(p);
             }
         }
@@ -198,11 +200,11 @@ fn instantiate(
     spec: &TopologySpec,
     c: &ComponentSpec,
     registry: &Registry,
+    budget: crate::bounds::MemoryBudget,
     errors: &mut Vec<SpecError>,
 ) -> Option<Planned> {
     let at = Some((c.role, c.name.as_str()));
-    let params = Params::new(c.params.clone(), spec.seed, c.parallelism)
-        .with_budget(crate::bounds::MemoryBudget::for_run(spec.memory_limit));
+    let params = Params::new(c.params.clone(), spec.seed, c.parallelism).with_budget(budget);
     let mut declared = Declarer::default();
     let factory = match c.role {
         Role::Spout => registry.spout(&c.kind).map(|f| Factory::Spout(f.clone())),

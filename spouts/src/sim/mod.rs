@@ -10,7 +10,7 @@ pub mod robot;
 mod spout;
 
 pub use robot::{Carry, Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
-pub use spout::{OUTPUT_BYTES_PER_SCAN, SimSpout};
+pub use spout::{OUTPUT_BYTES_PER_SCAN, SimSpout, outputs_fit};
 
 use crate::{Error, Result};
 

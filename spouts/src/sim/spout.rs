@@ -4,6 +4,7 @@
 
 use serde::Deserialize;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_topology::bounds::{MemoryBudget, OverBudget};
 use squall_topology::spec::readable_number;
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
@@ -68,6 +69,23 @@ impl Default for P {
 /// simulated seconds, 1800 scans.
 pub const OUTPUT_BYTES_PER_SCAN: usize = 1800;
 
+/// Checks that a simulated run of `secs` seconds, a reading (`unit`:
+/// "scans", "frames") every 1/`hz` s, leaves outputs that fit `budget`
+/// ([`OUTPUT_BYTES_PER_SCAN`] a reading): the sim spouts' factories and
+/// `squall localize`, which replays the route before the topology is
+/// built, ask the same.
+pub fn outputs_fit(budget: MemoryBudget, secs: f64, hz: f64, unit: &str) -> Result<(), OverBudget> {
+    let readings = secs * hz;
+    budget.check(
+        format!(
+            "a simulated run of {} s ({} {unit} of about {OUTPUT_BYTES_PER_SCAN} bytes each in the run's outputs)",
+            readable_number(secs),
+            readable_number(readings.ceil())
+        ),
+        readings * OUTPUT_BYTES_PER_SCAN as f64,
+    )
+}
+
 /// Emits a simulated run.
 #[derive(Debug)]
 pub struct SimSpout {
@@ -97,18 +115,7 @@ impl SimSpout {
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
-        let scans = config.duration_secs * config.scan_hz;
-        p.budget()
-            .check(
-                format!(
-                    "a simulated run of {} s ({} scans of about {OUTPUT_BYTES_PER_SCAN} bytes each in the \
-                     run's outputs)",
-                    readable_number(config.duration_secs),
-                    readable_number(scans.ceil())
-                ),
-                scans * OUTPUT_BYTES_PER_SCAN as f64,
-            )
-            .map_err(ParamError::new)?;
+        outputs_fit(p.budget(), config.duration_secs, config.scan_hz, "scans").map_err(ParamError::new)?;
         Ok(SimSpout {
             world: params.world,
             max_scans: params.max_scans,

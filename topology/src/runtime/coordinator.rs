@@ -9,6 +9,7 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+use crate::bounds::MemoryBudget;
 use crate::plan::Topology;
 use crate::runtime::control::{Event, EventKind, Failure, Stage, TaskFailure};
 use crate::runtime::memory;
@@ -129,7 +130,7 @@ impl<'a, H: Hosts> Coordinator<'a, H> {
             tasks: comps.iter().map(|c| c.spec.parallelism).sum(),
             last_scan: None,
             last_watch: Instant::now(),
-            memory_limit: topology.spec.memory_limit.or_else(memory::default_limit),
+            memory_limit: MemoryBudget::for_run(topology.spec.memory_limit).limit(),
         }
     }
 
