@@ -935,6 +935,66 @@ fn sim_writes_a_log_that_eval_and_topologies_read() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The source's own metrics in a run's metrics.json.
+fn source_metrics(dir: &std::path::Path) -> serde_json::Value {
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    m["components"][0]["custom"].clone()
+}
+
+#[test]
+fn slam_learns_a_simulated_scan_latency_from_the_log() {
+    let dir = out_dir("sim-latency");
+    let d = |p: &str| dir.join(p).to_str().unwrap().to_string();
+    // Scans stamped 0.1 s after they were measured, odometry at 50 Hz;
+    // and a log without latency.
+    for (latency, hz, name) in [("0.1", "50", "late"), ("0", "0", "clean")] {
+        let out = squall(&[
+            "sim",
+            "--duration",
+            "400",
+            "--seed",
+            "3",
+            "--scan-latency",
+            latency,
+            "--odom-hz",
+            hz,
+            "--out",
+            &d(name),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let log = d(&format!("{name}/sim.clf"));
+        let out = squall(&["slam", "--log", &log, "--quiet", "--out", &d(&format!("{name}/slam"))]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let m = source_metrics(&dir.join(name).join("slam"));
+        let offset = m["clock_offset_ms"].as_f64().unwrap();
+        let truth = -1e3 * latency.parse::<f64>().unwrap();
+        assert!((offset - truth).abs() < 20.0, "{name}: estimated {offset} ms against {truth} ms: {m}");
+        let posed = m["scans_posed_from_odometry_stream"].as_u64().or(m["scans_posed_as_logged"].as_u64());
+        assert_eq!(posed, Some(4000), "{m}");
+    }
+    // With the latency learnt the map is better than with the stamps as
+    // logged.
+    let late = d("late/sim.clf");
+    let out = squall(&[
+        "slam",
+        "--log",
+        &late,
+        "--quiet",
+        "--set",
+        "source.params.clock_offset=\"log\"",
+        "--out",
+        &d("late/as-logged"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(source_metrics(&dir.join("late/as-logged"))["scans_posed_as_logged"], 4000);
+    let relations = dir.join("late/sim.relations");
+    let learnt = relation_error(&dir.join("late/slam/trajectory.tum"), &relations);
+    let as_logged = relation_error(&dir.join("late/as-logged/trajectory.tum"), &relations);
+    assert!(learnt < as_logged, "learnt {learnt} m, as logged {as_logged} m");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn sim_odometry_quality_and_laser_flags_take_effect() {
     let dir = out_dir("sim-odometry");

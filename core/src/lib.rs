@@ -9,6 +9,7 @@
 //! (`squall-bolts`) share it without depending on each other.
 
 pub mod camera;
+pub mod clock;
 pub mod covariance;
 pub mod depth_render;
 mod error;
@@ -19,7 +20,9 @@ pub mod linemap;
 pub mod map_files;
 pub mod motion;
 pub mod occupancy;
+pub mod odometry_track;
 pub mod random;
+pub mod scan_match;
 pub mod sensor;
 pub mod textfile;
 pub mod trajectory;

@@ -73,6 +73,9 @@ pub enum Error {
         /// Probability of no return: must be in [0, 1].
         dropout: Real,
     },
+    /// A simulated sensor or wheel fault's setting is out of range.
+    #[error("{0}")]
+    Faults(String),
     /// A kidnapping outside the run or with an impossible carry.
     #[error(
         "a kidnapping needs 0 ≤ at_secs < the duration and 0 ≤ min_m ≤ max_m, got at_secs {at_secs}, min_m {min_m}, max_m {max_m}"

@@ -2,6 +2,7 @@
 //! network ingest.
 
 pub mod carmen;
+mod clocked;
 pub mod depth;
 mod error;
 #[cfg(feature = "cluster")]

@@ -95,6 +95,30 @@ pub(crate) fn range_m(s: &str) -> Result<f64, String> {
     }
 }
 
+/// A simulated scan's latency, seconds: [0, 0.5] (as the clock's
+/// search).
+pub(crate) fn latency_secs(s: &str) -> Result<f64, String> {
+    let v = number(s)?;
+    bounds::real("", v, 0.0, 0.5, "seconds", "as far as the scan clock searches").map_err(expected)
+}
+
+/// A simulated odometry rate, Hz: [0, 50] (0: one message a scan; 50:
+/// the simulator's physics rate).
+pub(crate) fn odom_hz(s: &str) -> Result<f64, String> {
+    let v = number(s)?;
+    bounds::real("", v, 0.0, 50.0, "messages a second", "the simulator's physics rate").map_err(expected)
+}
+
+/// A systematic share of error: (-0.5, 0.5).
+pub(crate) fn error_share(s: &str) -> Result<f64, String> {
+    let v = number(s)?;
+    if v.is_finite() && v.abs() < 0.5 {
+        Ok(v)
+    } else {
+        Err("expected a share in (-0.5, 0.5) (0.05: 5% too much)".into())
+    }
+}
+
 /// Beams of a scan: 2..=[`MAX_BEAMS`].
 pub(crate) fn beams(s: &str) -> Result<usize, String> {
     let v: u64 = s.trim().parse().map_err(|_| format!("expected a count, got \"{s}\""))?;

@@ -5,7 +5,9 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use squall_spouts::sim::output::write_run;
-use squall_spouts::sim::{OdometryQuality, SimConfig, Simulation, floor_for, laser_range_for, top_speed_for};
+use squall_spouts::sim::{
+    Faults, OdometryQuality, SimConfig, Simulation, floor_for, laser_range_for, top_speed_for,
+};
 
 use squall_topology::bounds::MemoryBudget;
 use squall_topology::spec::readable_number;
@@ -39,6 +41,27 @@ pub(super) struct SimArgs {
     /// drift), poor (1–2%, 0.15–0.35°/m) or bad (3–5%, 0.5–0.8°/m).
     #[arg(long, default_value = "poor", value_name = "good|poor|bad")]
     odometry: OdometryQuality,
+    /// Stamp each scan this long after the laser measured it, seconds,
+    /// with the odometry at its stamp: a driver that stamps on arrival.
+    #[arg(long, default_value_t = 0.0, value_name = "SECS", value_parser = super::numbers::latency_secs)]
+    scan_latency: f64,
+    /// Odometry messages per second (`ODOM` lines); 0 writes one with
+    /// each scan.
+    #[arg(long, default_value_t = 0.0, value_name = "HZ", value_parser = super::numbers::odom_hz)]
+    odom_hz: f64,
+    /// Write no-return beams as this many metres (±4 cm) instead of the
+    /// declared range: a no-return code below the declared maximum (needs
+    /// --declared-range above it).
+    #[arg(long, value_name = "M", value_parser = super::numbers::range_m)]
+    no_return: Option<f64>,
+    /// The maximum range the log declares, metres, when more than the
+    /// laser reaches.
+    #[arg(long, value_name = "M", value_parser = super::numbers::range_m)]
+    declared_range: Option<f64>,
+    /// The odometry misjudges every turn by this share (0.05: 5% too
+    /// much).
+    #[arg(long, default_value_t = 0.0, value_name = "SHARE", value_parser = super::numbers::error_share)]
+    turn_scale_error: f64,
     /// The most memory the log may take while it is made (it is written
     /// whole when the run ends), MiB; the default is 90% of the
     /// machine's. A --duration whose log would not fit is refused before
@@ -60,6 +83,13 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
         range_max: args.range_max.unwrap_or_else(|| laser_range_for(&args.world)),
         max_speed: top_speed_for(&args.world),
         odometry: args.odometry,
+        faults: Faults {
+            scan_latency_secs: args.scan_latency,
+            odom_hz: args.odom_hz,
+            no_return_m: args.no_return,
+            declared_range_m: args.declared_range,
+            turn_scale_error: args.turn_scale_error,
+        },
         ..SimConfig::default()
     };
     // The log is held whole until written: a FLASER line of up to 7

@@ -74,14 +74,14 @@ fn component<'a>(report: &'a RunReport, name: &str) -> Option<&'a ComponentRepor
 fn values(c: &ComponentReport, name: &str) -> Option<(u64, f64, u64)> {
     match c.custom.get(name)? {
         CustomMetric::Values { count, mean, p50, .. } => Some((*count, *mean, *p50)),
-        CustomMetric::Counter(_) | CustomMetric::Gauge(_) => None,
+        CustomMetric::Counter(_) | CustomMetric::Gauge(_) | CustomMetric::Measured(_) => None,
     }
 }
 
 fn counter(c: &ComponentReport, name: &str) -> Option<u64> {
     match c.custom.get(name)? {
         CustomMetric::Counter(n) => Some(*n),
-        CustomMetric::Values { .. } | CustomMetric::Gauge(_) => None,
+        CustomMetric::Values { .. } | CustomMetric::Gauge(_) | CustomMetric::Measured(_) => None,
     }
 }
 

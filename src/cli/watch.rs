@@ -404,6 +404,7 @@ fn log_line(s: &LiveSample) -> String {
                 CustomMetric::Counter(v) | CustomMetric::Gauge(v) => {
                     part.push_str(&format!(", {k} {}", own(k, *v)))
                 }
+                CustomMetric::Measured(m) => part.push_str(&format!(", {k} {m:.1}")),
                 CustomMetric::Values { .. } => {}
             }
         }

@@ -167,6 +167,8 @@ pub struct RemoteTask {
     pub counters: Vec<(String, u64)>,
     /// Its own gauges.
     pub gauges: Vec<(String, u64)>,
+    /// Its own measured quantities.
+    pub measured: Vec<(String, f64)>,
 }
 
 /// A host of a cluster run as the coordinator last heard from it.
@@ -267,6 +269,14 @@ impl LiveRun {
                         .collect()
                 };
                 let (counters, gauges) = (own(false), own(true));
+                let measured = r
+                    .custom
+                    .iter()
+                    .filter_map(|(k, v)| match v {
+                        CustomMetric::Measured(m) => Some((k.clone(), *m)),
+                        _ => None,
+                    })
+                    .collect();
                 let remote = RemoteTask {
                     received: r.received,
                     emitted: r.emitted,
@@ -284,6 +294,7 @@ impl LiveRun {
                     last_error: s.last_error,
                     counters,
                     gauges,
+                    measured,
                 };
                 out.push((c as u32, t as u32, remote));
             }
@@ -450,6 +461,7 @@ fn remote_now(t: usize, host: u16, r: RemoteTask, elapsed: Duration) -> (TaskRep
         abandoned: 0,
         custom: (r.counters.into_iter().map(|(k, v)| (k, CustomMetric::Counter(v))))
             .chain(r.gauges.into_iter().map(|(k, gauge)| (k, CustomMetric::Gauge(gauge))))
+            .chain(r.measured.into_iter().map(|(k, m)| (k, CustomMetric::Measured(m))))
             .collect(),
         lost: false,
     };
@@ -477,7 +489,7 @@ fn component_of(lc: &LiveComponent, per_task: Vec<TaskReport>) -> ComponentRepor
             match (custom.get_mut(k), v) {
                 (Some(CustomMetric::Counter(a)), CustomMetric::Counter(b))
                 | (Some(CustomMetric::Gauge(a)), CustomMetric::Gauge(b)) => *a += b,
-                (None, CustomMetric::Counter(_) | CustomMetric::Gauge(_)) => {
+                (None, CustomMetric::Counter(_) | CustomMetric::Gauge(_) | CustomMetric::Measured(_)) => {
                     custom.insert(k.clone(), v.clone());
                 }
                 _ => {}

@@ -47,6 +47,9 @@ pub(crate) enum Custom {
     /// The last value set: a level (bytes held, particles owned), not a
     /// total.
     Gauge(u64),
+    /// A quantity measured or chosen once (a calibration), in the unit
+    /// its name says.
+    Measured(f64),
 }
 
 impl Default for TaskStats {
@@ -87,6 +90,16 @@ impl TaskStats {
                 let mut h = Box::new(new_histogram());
                 h.saturating_record(value.max(1));
                 self.custom.insert(name.to_string(), Custom::Values(h));
+            }
+        }
+    }
+
+    pub(crate) fn measured(&mut self, name: &str, value: f64) {
+        match self.custom.get_mut(name) {
+            Some(Custom::Measured(m)) => *m = value,
+            Some(_) => {}
+            None => {
+                self.custom.insert(name.to_string(), Custom::Measured(value));
             }
         }
     }
@@ -157,6 +170,10 @@ pub enum CustomMetric {
     /// A level's last value, summed over a component's tasks (a number in
     /// metrics.json, as a counter is; Prometheus types it as a gauge).
     Gauge(u64),
+    /// A quantity the component measured or chose once (a calibration,
+    /// such as the laser's clock offset), in the unit its name says; over
+    /// tasks, the first task's.
+    Measured(f64),
 }
 
 pub(crate) fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<String, CustomMetric> {
@@ -166,6 +183,7 @@ pub(crate) fn summarize_custom(custom: &BTreeMap<String, Custom>) -> BTreeMap<St
             let m = match v {
                 Custom::Counter(c) => CustomMetric::Counter(*c),
                 Custom::Gauge(g) => CustomMetric::Gauge(*g),
+                Custom::Measured(m) => CustomMetric::Measured(*m),
                 Custom::Values(h) => CustomMetric::Values {
                     count: h.len(),
                     mean: h.mean(),

@@ -331,7 +331,7 @@ impl<B: Bolt> BoltHarness<B> {
     pub fn counter(&self, name: &str) -> Option<u64> {
         match self.metrics().get(name)? {
             CustomMetric::Counter(c) => Some(*c),
-            CustomMetric::Values { .. } | CustomMetric::Gauge(_) => None,
+            CustomMetric::Values { .. } | CustomMetric::Gauge(_) | CustomMetric::Measured(_) => None,
         }
     }
 
@@ -339,7 +339,7 @@ impl<B: Bolt> BoltHarness<B> {
     pub fn gauge(&self, name: &str) -> Option<u64> {
         match self.metrics().get(name)? {
             CustomMetric::Gauge(gauge) => Some(*gauge),
-            CustomMetric::Values { .. } | CustomMetric::Counter(_) => None,
+            CustomMetric::Values { .. } | CustomMetric::Counter(_) | CustomMetric::Measured(_) => None,
         }
     }
 

@@ -78,17 +78,7 @@ const MIN_STEPS: usize = 4 * MAX_SPAN;
 /// millimetre, so that the system stays well conditioned.
 const FLOOR: Real = 1e-10;
 
-/// A measurement of the motion between two consecutive processed
-/// readings made apart from the filter (for SLAM, the later scan matched
-/// against the earlier one), with its covariance, whose scale the
-/// smoother does not trust and fits.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct MeasuredStep {
-    /// The motion, in the earlier reading's frame.
-    pub motion: Pose2,
-    /// Its covariance in (x, y, θ), up to scale.
-    pub covariance: Mat3,
-}
+pub use squall_core::scan_match::MeasuredStep;
 
 /// χ² with three degrees of freedom at 0.999: a step whose measurement and
 /// odometry differ by more, given both their noises, has one of them

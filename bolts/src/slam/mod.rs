@@ -14,7 +14,6 @@ pub mod model;
 pub(crate) mod old_map;
 pub mod options;
 pub(crate) mod proposal;
-pub(crate) mod scan_to_scan;
 #[cfg(test)]
 mod scenes;
 pub(crate) mod transfer;

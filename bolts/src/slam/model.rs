@@ -303,7 +303,7 @@ impl ParticleModel for SlamModel {
         if self.options.smoother != Smoother::Scans {
             return None;
         }
-        crate::slam::scan_to_scan::match_scans(from, to)
+        squall_core::scan_match::match_scans(from, to)
     }
 
     fn trajectory_output(&self) -> TrajectoryOutput {

@@ -2,7 +2,12 @@
 //!
 //! The spout emits every front-laser scan on stream `scan`, rear-laser scans
 //! on `rear_scan` and odometry on `odom`, as fast as possible or paced at the
-//! recorded rate times a factor.
+//! recorded rate times a factor. Each front scan carries the odometry at the
+//! instant it was measured, which [`ScanClock`] finds: the `ODOM` stream (or
+//! the scans' own poses) interpolated at the scan's stamp plus the offset
+//! between the laser's clock and the odometry's, learnt from the first
+//! scans (`clock_offset = "auto"`, the default), given in seconds, or
+//! `"log"` for the poses as recorded.
 
 mod parse;
 mod reader;
@@ -10,6 +15,7 @@ mod reader;
 use std::path::PathBuf;
 
 use serde::Deserialize;
+use squall_core::clock::{ClockMode, ScanClock};
 use squall_core::sensor::{LaserReading, Odometry};
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
@@ -39,6 +45,9 @@ struct CarmenParams {
     range_max: Option<f64>,
     /// Stop after this many front scans.
     max_scans: Option<u64>,
+    /// `"auto"` (the default), `"log"` or seconds: see the module docs.
+    #[serde(default)]
+    clock_offset: ClockMode,
 }
 
 /// Replays a CARMEN log.
@@ -49,7 +58,10 @@ pub struct CarmenSpout {
     options: ReadOptions,
     max_scans: Option<u64>,
     reader: Option<LogReader>,
+    clock: ScanClock,
+    /// Front scans read, and emitted.
     scans: u64,
+    emitted: u64,
     /// Front scans emitted, for the progress display.
     readings: ReadingCounter,
 }
@@ -68,6 +80,8 @@ impl CarmenSpout {
             options: ReadOptions { default_range_max: range_max, skip_bad: params.skip_bad },
             max_scans: params.max_scans,
             reader: None,
+            clock: ScanClock::new(params.clock_offset),
+            emitted: 0,
             scans: 0,
             readings: ReadingCounter::default(),
         })
@@ -81,6 +95,18 @@ impl CarmenSpout {
             let line = self.reader.as_ref().map_or(0, LogReader::line);
             format!("{}:{line}: {e}", self.log.display()).into()
         })
+    }
+}
+
+impl CarmenSpout {
+    /// Emits the front scans whose pose the clock has decided.
+    async fn emit_ready(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        while let Some(reading) = self.clock.next_ready() {
+            self.readings.add(1);
+            self.emitted += 1;
+            out.emit("scan", reading).await?;
+        }
+        Ok(())
     }
 }
 
@@ -105,15 +131,17 @@ impl Spout for CarmenSpout {
     }
 
     async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
-        if self.max_scans.is_some_and(|m| self.scans >= m) {
-            return Ok(SpoutStatus::Done);
-        }
         let reader = self.reader.as_mut().ok_or("the log was not opened")?;
-        let record = match reader.next_record() {
+        let record =
+            if self.max_scans.is_some_and(|m| self.scans >= m) { None } else { reader.next_record() };
+        let record = match record {
             None => {
                 let (skipped, other) = (reader.skipped(), reader.other_records().values().sum());
                 out.count("records_skipped", skipped);
                 out.count("records_other_types", other);
+                self.clock.finish();
+                self.emit_ready(out).await?;
+                crate::clocked::report_clock(&self.clock, self.emitted, out);
                 return Ok(SpoutStatus::Done);
             }
             Some(r) => r?,
@@ -123,24 +151,24 @@ impl Spout for CarmenSpout {
                 if !self.wait_for(reading.stamp).await? {
                     return Ok(SpoutStatus::Continue);
                 }
-                let stream = match laser {
+                match laser {
                     Laser::Front => {
                         self.scans += 1;
-                        self.readings.add(1);
-                        "scan"
+                        self.clock.scan(reading);
                     }
-                    Laser::Rear => "rear_scan",
-                };
-                out.emit(stream, reading).await?;
+                    Laser::Rear => out.emit("rear_scan", reading).await?,
+                }
             }
             Record::Odom(odom) => {
                 if !self.wait_for(odom.stamp).await? {
                     return Ok(SpoutStatus::Continue);
                 }
+                self.clock.odometry(odom.stamp, odom.pose);
                 out.emit("odom", odom).await?;
             }
             Record::Param(..) | Record::Other(_) => {}
         }
+        self.emit_ready(out).await?;
         Ok(SpoutStatus::Continue)
     }
 }

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
-use squall_core::geometry::{Pose2, normalize_angle};
+use squall_core::geometry::Pose2;
+use squall_core::odometry_track::interpolate_pose;
 use squall_core::sensor::{LaserReading, Odometry};
 
 use super::cdr::CdrError;
@@ -19,8 +20,9 @@ use super::messages::{self, Transform};
 use super::record_check;
 
 /// Scans farther than this (s) from the odometry stream's first or last
-/// message get no pose: they are counted, not guessed.
-pub const MAX_EXTRAPOLATION: f64 = 0.2;
+/// message get no pose: they are counted, not guessed (the odometry
+/// track's bound).
+pub use squall_core::odometry_track::MAX_EXTRAPOLATION;
 
 /// Which topics to read, and how strictly.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -676,13 +678,7 @@ pub fn interpolate(odometry: &[Odometry], t: f64) -> Option<Pose2> {
     }
     let i = odometry.partition_point(|o| o.stamp <= t);
     let (a, b) = (&odometry[i - 1], &odometry[i]);
-    let span = b.stamp - a.stamp;
-    let f = if span > 0.0 { (t - a.stamp) / span } else { 0.0 };
-    Some(Pose2::new(
-        a.pose.x + f * (b.pose.x - a.pose.x),
-        a.pose.y + f * (b.pose.y - a.pose.y),
-        a.pose.theta + f * normalize_angle(b.pose.theta - a.pose.theta),
-    ))
+    Some(interpolate_pose(a.stamp, &a.pose, b.stamp, &b.pose, t))
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@ pub mod roadmap;
 pub mod robot;
 mod spout;
 
-pub use robot::{Carry, Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
+pub use robot::{Carry, Faults, Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 pub use spout::{OUTPUT_BYTES_PER_SCAN, SimSpout, outputs_fit};
 
 use crate::{Error, Result};

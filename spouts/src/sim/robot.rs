@@ -10,6 +10,7 @@ use std::f64::consts::PI;
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use squall_core::geometry::{Pose2, Real, normalize_angle};
+use squall_core::odometry_track::interpolate_pose;
 use squall_core::sensor::{LaserReading, Odometry};
 
 use super::office::{Floor, Route};
@@ -48,6 +49,77 @@ pub struct SimConfig {
     /// Whether, and when, the robot is carried elsewhere without its
     /// odometry noticing. The default is never.
     pub kidnap: Option<Kidnap>,
+    /// Faults of real sensors and wheels. The default is none.
+    pub faults: Faults,
+}
+
+/// Faults of real lasers and wheels that a clean simulation lacks, so
+/// that what copes with them can be tested where the truth is known. All
+/// are off by default.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Faults {
+    /// Each scan is stamped this long after the laser measured it, s (in
+    /// [0, 0.5]), and carries the odometry at its stamp: a driver that
+    /// stamps scans on arrival. (On FR079 the scans lag their odometry by
+    /// about 0.1 s.)
+    pub scan_latency_secs: Real,
+    /// Odometry messages per second, in (0, 50]; 0 (the default) sends one
+    /// with each scan, with the scan's pose.
+    pub odom_hz: Real,
+    /// No-return beams read this many metres (each within ±4 cm of it)
+    /// instead of the declared range: a laser whose no-return code sits
+    /// below its declared maximum, so that its readings look like walls
+    /// (one real log declares 80 m and reads 51.05–51.12 for no return).
+    pub no_return_m: Option<Real>,
+    /// The maximum range the log declares, metres, when it is more than
+    /// the laser reaches (FR079 declares 80 m; its longest return is
+    /// 36.6 m). The default is the laser's range.
+    pub declared_range_m: Option<Real>,
+    /// The odometry misjudges every turn by this share, systematically
+    /// (0.05: it reports 5% more turning than the robot made), in
+    /// (-0.5, 0.5).
+    pub turn_scale_error: Real,
+}
+
+/// The longest range a log may declare, metres (as `--range-max`).
+const MAX_DECLARED_RANGE: Real = 1000.0;
+/// The widest jitter of a no-return code, metres.
+const NO_RETURN_JITTER: Real = 0.04;
+
+impl Faults {
+    /// Checks every setting's range against the laser's `range_max`.
+    fn check(&self, range_max: Real) -> Result<()> {
+        let declared = self.declared_range_m.unwrap_or(range_max);
+        let fault = |what: String| Err(Error::Faults(what));
+        if !(0.0..=0.5).contains(&self.scan_latency_secs) {
+            return fault(format!("scan_latency_secs must be in [0, 0.5] s, got {}", self.scan_latency_secs));
+        }
+        if !(self.odom_hz == 0.0 || (self.odom_hz > 0.0 && self.odom_hz <= PHYSICS_HZ)) {
+            return fault(format!("odom_hz must be 0 or in (0, {PHYSICS_HZ}], got {}", self.odom_hz));
+        }
+        if self.declared_range_m.is_some()
+            && !(declared.is_finite() && declared >= range_max && declared <= MAX_DECLARED_RANGE)
+        {
+            return fault(format!(
+                "declared_range_m must be at least the laser's range ({range_max} m) and at most {} m, got {declared}",
+                MAX_DECLARED_RANGE
+            ));
+        }
+        if let Some(code) = self.no_return_m
+            && !(code.is_finite()
+                && code > range_max + NO_RETURN_JITTER
+                && code + NO_RETURN_JITTER < declared)
+        {
+            return fault(format!(
+                "the no-return code (no_return_m, --no-return) must lie beyond the laser's range ({range_max} m) and below the declared range ({declared} m: declared_range_m, --declared-range), got {code}"
+            ));
+        }
+        if self.turn_scale_error.is_nan() || self.turn_scale_error.abs() >= 0.5 {
+            return fault(format!("turn_scale_error must be in (-0.5, 0.5), got {}", self.turn_scale_error));
+        }
+        Ok(())
+    }
 }
 
 /// A kidnapping: at `at_secs` the robot is lifted and set down at a place
@@ -206,6 +278,7 @@ impl Default for SimConfig {
             odometry: OdometryQuality::default(),
             start: Start::default(),
             kidnap: None,
+            faults: Faults::default(),
         }
     }
 }
@@ -232,6 +305,7 @@ impl SimConfig {
             let (scan_hz, max_speed, max_turn) = (self.scan_hz, self.max_speed, self.max_turn);
             return Err(Error::Motion { scan_hz, max_speed, max_turn });
         }
+        self.faults.check(self.range_max)?;
         if let Some(k) = self.kidnap {
             let at_ok = k.at_secs.is_finite() && k.at_secs >= 0.0 && k.at_secs < self.duration_secs;
             let carry_ok = k.min_m.is_finite() && k.max_m.is_finite() && 0.0 <= k.min_m && k.min_m <= k.max_m;
@@ -279,7 +353,15 @@ pub struct Simulation {
     heading_bias: Real,
     /// The odometry's errors.
     errors: OdometryErrors,
-    pending: Option<SimEvent>,
+    /// Events due, in order.
+    outbox: VecDeque<SimEvent>,
+    /// Scans measured and not yet stamped (with a scan latency), with
+    /// the true pose they were measured at.
+    in_flight: VecDeque<(LaserReading, Pose2)>,
+    /// The odometry before the last physics step, to interpolate at a
+    /// stamp between steps.
+    odometry_before: Pose2,
+    steps_per_odom: Option<u64>,
     /// The kidnapping, once it happened.
     carried: Option<Carry>,
 }
@@ -334,6 +416,8 @@ impl Simulation {
         };
         let steps_per_scan = (PHYSICS_HZ / config.scan_hz).round().max(1.0) as u64;
         let floor_nodes = floor.nodes.len();
+        let steps_per_odom = (config.faults.odom_hz > 0.0)
+            .then(|| (PHYSICS_HZ / config.faults.odom_hz).round().max(1.0) as u64);
         Ok(Simulation {
             steps: (config.duration_secs * PHYSICS_HZ) as u64,
             route_rng: stream_for_purpose(config.seed, "route"),
@@ -353,7 +437,10 @@ impl Simulation {
             scale_bias,
             heading_bias,
             errors,
-            pending: None,
+            outbox: VecDeque::new(),
+            in_flight: VecDeque::new(),
+            odometry_before: truth,
+            steps_per_odom,
             carried: None,
         })
     }
@@ -510,9 +597,10 @@ impl Simulation {
         let e = &self.errors;
         let o_trans =
             d_trans * (1.0 + self.scale_bias) + e.trans_noise * d_trans.abs() * standard_normal(rng);
-        let o_rot = d_rot
+        let o_rot = d_rot * (1.0 + self.config.faults.turn_scale_error)
             + self.heading_bias * d_trans.abs()
             + (e.rot_noise * d_rot.abs() + e.rot_noise_per_m * d_trans.abs()) * standard_normal(rng);
+        self.odometry_before = self.odometry;
         self.odometry = self.odometry.compose(&Pose2::new(o_trans, 0.0, o_rot));
         self.step += 1;
     }
@@ -530,7 +618,12 @@ impl Simulation {
                     Some(r) if !dropped => {
                         (r + c.range_noise * standard_normal(&mut self.laser_rng)).max(0.0) as f32
                     }
-                    _ => c.range_max as f32,
+                    _ => match c.faults.no_return_m {
+                        Some(code) => {
+                            (code + NO_RETURN_JITTER * (2.0 * self.laser_rng.random::<Real>() - 1.0)) as f32
+                        }
+                        None => c.range_max as f32,
+                    },
                 }
             })
             .collect();
@@ -540,21 +633,24 @@ impl Simulation {
             angle_min,
             angle_increment: increment,
             range_min: 0.0,
-            range_max: c.range_max,
+            range_max: c.faults.declared_range_m.unwrap_or(c.range_max),
             odometry: self.odometry,
             laser_offset: Pose2::IDENTITY,
         }
     }
 }
 
+/// An odometry message of `pose` at `stamp` (the simulator reports no
+/// velocities).
+fn odometry_message(stamp: Real, pose: Pose2) -> Odometry {
+    Odometry { stamp, pose, linear_velocity: 0.0, angular_velocity: 0.0 }
+}
+
 impl Iterator for Simulation {
     type Item = SimEvent;
 
     fn next(&mut self) -> Option<SimEvent> {
-        if let Some(e) = self.pending.take() {
-            return Some(e);
-        }
-        while self.step < self.steps {
+        while self.outbox.is_empty() && self.step < self.steps {
             if let Some(k) = self.config.kidnap
                 && self.carried.is_none()
                 && self.stamp() >= k.at_secs
@@ -562,19 +658,45 @@ impl Iterator for Simulation {
                 self.kidnap(k);
             }
             self.advance();
+            let now = self.stamp();
+            if let Some(every) = self.steps_per_odom
+                && self.step.is_multiple_of(every)
+            {
+                self.outbox.push_back(SimEvent::Odom(odometry_message(now, self.odometry)));
+            }
             if self.step.is_multiple_of(self.steps_per_scan) {
-                let scan = self.scan();
-                let odom = Odometry {
-                    stamp: scan.stamp,
-                    pose: self.odometry,
-                    linear_velocity: 0.0,
-                    angular_velocity: 0.0,
+                let mut scan = self.scan();
+                scan.stamp = now + self.config.faults.scan_latency_secs;
+                self.in_flight.push_back((scan, self.truth));
+            }
+            // Scans whose stamp has come carry the odometry at it,
+            // interpolated within the physics step.
+            while self.in_flight.front().is_some_and(|(s, _)| s.stamp <= now + 1e-9) {
+                let (mut scan, truth) = self.in_flight.pop_front().expect("a scan in flight");
+                let step_start = now - 1.0 / PHYSICS_HZ;
+                scan.odometry = if scan.stamp < now {
+                    interpolate_pose(step_start, &self.odometry_before, now, &self.odometry, scan.stamp)
+                } else {
+                    self.odometry
                 };
-                self.pending = Some(SimEvent::Scan(scan, self.truth));
-                return Some(SimEvent::Odom(odom));
+                if self.steps_per_odom.is_none() {
+                    self.outbox.push_back(SimEvent::Odom(odometry_message(scan.stamp, scan.odometry)));
+                }
+                self.outbox.push_back(SimEvent::Scan(scan, truth));
             }
         }
-        None
+        // Scans still in flight when the run ends arrive as the robot
+        // stands: with the odometry where it stopped.
+        if self.outbox.is_empty()
+            && let Some((mut scan, truth)) = self.in_flight.pop_front()
+        {
+            scan.odometry = self.odometry;
+            if self.steps_per_odom.is_none() {
+                self.outbox.push_back(SimEvent::Odom(odometry_message(scan.stamp, scan.odometry)));
+            }
+            self.outbox.push_back(SimEvent::Scan(scan, truth));
+        }
+        self.outbox.pop_front()
     }
 }
 
@@ -636,6 +758,71 @@ mod tests {
             assert!(on_corridor(&floor, p, 0.05), "seed {}: {p:?}", i + 1);
             let far = drawn.iter().filter(|q| q.distance(p) > 2.0).count();
             assert!(far >= 15, "seed {}: starts spread over the floor, {far} of 20 farther than 2 m", i + 1);
+        }
+    }
+
+    #[test]
+    fn faults_reach_the_readings() {
+        let faults = Faults {
+            scan_latency_secs: 0.1,
+            odom_hz: 50.0,
+            no_return_m: Some(51.1),
+            declared_range_m: Some(80.0),
+            turn_scale_error: 0.05,
+        };
+        let config = SimConfig { seed: 2, duration_secs: 120.0, faults, ..SimConfig::default() };
+        let events: Vec<SimEvent> = Simulation::new(office(1, 3, 2), config).unwrap().collect();
+        let odometry: Vec<&Odometry> =
+            events.iter().filter_map(|e| if let SimEvent::Odom(o) = e { Some(o) } else { None }).collect();
+        let scans: Vec<(&LaserReading, &Pose2)> = events
+            .iter()
+            .filter_map(|e| if let SimEvent::Scan(s, t) = e { Some((s, t)) } else { None })
+            .collect();
+        assert_eq!((odometry.len(), scans.len()), (6000, 1200));
+        // Stamped 0.1 s late, carrying the odometry at the stamp (not the
+        // measurement): the stream interpolated there.
+        assert!((scans[0].0.stamp - 0.2).abs() < 1e-9, "{}", scans[0].0.stamp);
+        let at = |t: Real| odometry.iter().find(|o| (o.stamp - t).abs() < 1e-9).map(|o| o.pose);
+        assert_eq!(at(scans[10].0.stamp), Some(scans[10].0.odometry));
+        // The declared range and the no-return code below it.
+        let (mut codes, mut beyond) = (0, 0);
+        for (s, _) in &scans {
+            assert_eq!(s.range_max, 80.0);
+            for &r in &s.ranges {
+                let r = Real::from(r);
+                if (51.06..=51.14).contains(&r) {
+                    codes += 1;
+                } else if r > 30.0 {
+                    beyond += 1;
+                }
+            }
+        }
+        assert!(codes > 100 && beyond == 0, "{codes} no-return codes, {beyond} other readings beyond 30 m");
+        // The odometry reports 5% more of every turn than the same run
+        // without the fault (whose noise and drift are the same).
+        let turned = |faults: Faults| {
+            let config = SimConfig { seed: 2, duration_secs: 120.0, faults, ..SimConfig::default() };
+            let odometry: Vec<Pose2> = Simulation::new(office(1, 3, 2), config)
+                .unwrap()
+                .filter_map(|e| if let SimEvent::Scan(s, _) = e { Some(s.odometry) } else { None })
+                .collect();
+            odometry.windows(2).map(|w| normalize_angle(w[1].theta - w[0].theta).abs()).sum::<Real>()
+        };
+        let ratio =
+            turned(Faults { turn_scale_error: 0.05, ..Faults::default() }) / turned(Faults::default());
+        assert!((1.04..1.06).contains(&ratio), "turn ratio {ratio}");
+        // Out of range, each says what is allowed.
+        for (bad, says) in [
+            (Faults { scan_latency_secs: 0.6, ..Faults::default() }, "scan_latency_secs must be in [0, 0.5]"),
+            (Faults { odom_hz: 60.0, ..Faults::default() }, "odom_hz must be 0 or in (0, 50]"),
+            (Faults { no_return_m: Some(51.0), ..Faults::default() }, "below the declared range (30 m"),
+            (
+                Faults { turn_scale_error: f64::NAN, ..Faults::default() },
+                "turn_scale_error must be in (-0.5, 0.5)",
+            ),
+        ] {
+            let e = SimConfig { faults: bad, ..SimConfig::default() }.check().unwrap_err().to_string();
+            assert!(e.contains(says), "{e}");
         }
     }
 

@@ -2,7 +2,10 @@
 //! (`LaserReading`), `odom` (`Odometry`) and `truth` (`PoseStamped`, the
 //! true pose at each scan).
 
+use std::collections::VecDeque;
+
 use serde::Deserialize;
+use squall_core::clock::{ClockMode, ScanClock};
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::bounds::{MemoryBudget, OverBudget};
 use squall_topology::spec::readable_number;
@@ -10,7 +13,7 @@ use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
 };
 
-use super::robot::{Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
+use super::robot::{Faults, Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 use super::{DEFAULT_WORLD, laser_range_for, top_speed_for};
 
 /// The `sim` spout's params; a param left out takes its value from
@@ -43,6 +46,12 @@ struct P {
     /// A kidnapping, e.g. `{ at_secs = 10 }` (carried 5–20 m, drawn per
     /// seed; [`Kidnap`]). The default is none.
     kidnap: Option<Kidnap>,
+    /// Faults of real sensors, e.g. `{ scan_latency_secs = 0.1, odom_hz = 50 }`
+    /// ([`Faults`]). The default is none.
+    faults: Faults,
+    /// How scans are timed against the odometry: `"auto"` (the default),
+    /// `"log"` or seconds, as the log sources ([`ClockMode`]).
+    clock_offset: ClockMode,
 }
 
 impl Default for P {
@@ -58,6 +67,8 @@ impl Default for P {
             odometry: OdometryQuality::default(),
             start: Start::default(),
             kidnap: None,
+            faults: Faults::default(),
+            clock_offset: ClockMode::default(),
         }
     }
 }
@@ -94,6 +105,10 @@ pub struct SimSpout {
     scans: u64,
     config: SimConfig,
     sim: Option<Simulation>,
+    clock: ScanClock,
+    /// The true poses of the scans the clock holds, in order.
+    truths: VecDeque<PoseStamped>,
+    emitted: u64,
     /// Scans emitted, for the progress display.
     readings: ReadingCounter,
 }
@@ -112,6 +127,7 @@ impl SimSpout {
             odometry: params.odometry,
             start: params.start,
             kidnap: params.kidnap,
+            faults: params.faults,
             ..SimConfig::default()
         };
         config.check().map_err(ParamError::new)?;
@@ -122,6 +138,9 @@ impl SimSpout {
             scans: 0,
             config,
             sim: None,
+            clock: ScanClock::new(params.clock_offset),
+            truths: VecDeque::new(),
+            emitted: 0,
             readings: ReadingCounter::default(),
         })
     }
@@ -145,25 +164,42 @@ impl Spout for SimSpout {
     }
 
     async fn next(&mut self, out: &mut Emitter) -> Result<SpoutStatus, BoxError> {
-        if self.max_scans.is_some_and(|m| self.scans >= m) {
-            return Ok(SpoutStatus::Done);
-        }
         let sim = self.sim.as_mut().ok_or("the simulation was not opened")?;
-        match sim.next() {
-            None => Ok(SpoutStatus::Done),
+        let event = if self.max_scans.is_some_and(|m| self.scans >= m) { None } else { sim.next() };
+        match event {
+            None => {
+                self.clock.finish();
+                self.emit_ready(out).await?;
+                crate::clocked::report_clock(&self.clock, self.emitted, out);
+                return Ok(SpoutStatus::Done);
+            }
             Some(SimEvent::Odom(o)) => {
+                self.clock.odometry(o.stamp, o.pose);
                 out.emit("odom", o).await?;
-                Ok(SpoutStatus::Continue)
             }
             Some(SimEvent::Scan(scan, truth)) => {
                 self.scans += 1;
-                self.readings.add(1);
-                let stamp = scan.stamp;
-                out.emit("scan", scan).await?;
-                out.emit("truth", PoseStamped { stamp, pose: truth }).await?;
-                Ok(SpoutStatus::Continue)
+                self.truths.push_back(PoseStamped { stamp: scan.stamp, pose: truth });
+                self.clock.scan(scan);
             }
         }
+        self.emit_ready(out).await?;
+        Ok(SpoutStatus::Continue)
+    }
+}
+
+impl SimSpout {
+    /// Emits the scans whose pose the clock has decided, each with its
+    /// true pose.
+    async fn emit_ready(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
+        while let Some(scan) = self.clock.next_ready() {
+            let truth = self.truths.pop_front().ok_or("a scan without its true pose")?;
+            self.readings.add(1);
+            self.emitted += 1;
+            out.emit("scan", scan).await?;
+            out.emit("truth", truth).await?;
+        }
+        Ok(())
     }
 }
 

@@ -39,6 +39,7 @@ enum CustomWire {
     Counter(u64),
     Values(Vec<u8>),
     Gauge(u64),
+    Measured(f64),
 }
 
 #[cfg(feature = "cluster")]
@@ -118,6 +119,7 @@ impl TaskOutcome {
                         Custom::Counter(c) => CustomWire::Counter(*c),
                         Custom::Values(h) => CustomWire::Values(histogram_bytes(h)),
                         Custom::Gauge(g) => CustomWire::Gauge(*g),
+                        Custom::Measured(m) => CustomWire::Measured(*m),
                     };
                     (k.clone(), v)
                 })
@@ -137,6 +139,7 @@ impl TaskOutcome {
                 CustomWire::Counter(c) => Custom::Counter(c),
                 CustomWire::Values(bytes) => Custom::Values(Box::new(decode_histogram(&bytes)?)),
                 CustomWire::Gauge(g) => Custom::Gauge(g),
+                CustomWire::Measured(m) => Custom::Measured(m),
             };
             custom.insert(k, v);
         }

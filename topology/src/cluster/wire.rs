@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 const MAGIC: [u8; 2] = *b"SQ";
 /// The frame format; a peer speaking another is refused (2: batches of
 /// tuples travel as one frame).
-pub const WIRE_VERSION: u8 = 4;
+pub const WIRE_VERSION: u8 = 5;
 /// Frames larger than this are refused unread, unless the cluster sets
 /// another limit: a map with its tiles fits many times over.
 pub const DEFAULT_MAX_FRAME: usize = 64 << 20;

@@ -283,6 +283,13 @@ impl Emitter {
         self.stats.gauge(name, value);
     }
 
+    /// Sets the component's measured quantity `name` to `value`: a
+    /// calibration or a choice made from the data (the laser's clock
+    /// offset, in the unit the name says), reported as a number.
+    pub fn measured(&mut self, name: &str, value: f64) {
+        self.stats.measured(name, value);
+    }
+
     /// This task's index.
     pub fn task_index(&self) -> usize {
         self.task

@@ -1,9 +1,10 @@
 //! Scan-to-scan matching (laser odometry): the motion between two
 //! processed scans, from the scans alone, with its covariance.
 //!
-//! The output smoother (`pf::smoother`) fuses three estimates of each step
-//! between processed scans: the best lineage's, the odometry's and this
-//! one. Its error is its own: it uses no map, so it shares neither the
+//! SLAM's output smoother (squall-bolts' `pf::smoother`) fuses three
+//! estimates of each step between processed scans: the best lineage's, the
+//! odometry's and this one; the clock-offset estimate ([`crate::clock`])
+//! compares its turns with the odometry's. Its error is its own: it uses no map, so it shares neither the
 //! lineage's slow wander against its map nor the wheels' slip. Over one
 //! step indoors it is better than both (decision 0014).
 //!
@@ -17,11 +18,23 @@
 //! is what the smoother needs to trust the odometry there. Its scale is
 //! not trusted: the smoother fits one per component.
 
-use squall_core::covariance::{ZERO, apply, inverse};
-use squall_core::geometry::{Pose2, Real};
-use squall_core::sensor::LaserReading;
+use serde::{Deserialize, Serialize};
 
-use crate::pf::smoother::MeasuredStep;
+use crate::covariance::{Mat3, ZERO, apply, inverse};
+use crate::geometry::{Pose2, Real};
+use crate::sensor::LaserReading;
+
+/// A measurement of the motion between two consecutive processed
+/// readings made apart from a filter (for SLAM, the later scan matched
+/// against the earlier one), with its covariance, whose scale the
+/// smoother does not trust and fits.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MeasuredStep {
+    /// The motion, in the earlier reading's frame.
+    pub motion: Pose2,
+    /// Its covariance in (x, y, θ), up to scale.
+    pub covariance: Mat3,
+}
 
 /// Iterations of pairing and Gauss–Newton.
 const ITERATIONS: usize = 25;
@@ -177,7 +190,7 @@ fn points_of(scan: &LaserReading) -> Vec<(Real, Real)> {
 /// The motion of the robot from `from` to `to` (in `from`'s frame) that
 /// best lays `to`'s scan onto `from`'s, starting from the odometry's, with
 /// its covariance; `None` where too few points pair up.
-pub(crate) fn match_scans(from: &LaserReading, to: &LaserReading) -> Option<MeasuredStep> {
+pub fn match_scans(from: &LaserReading, to: &LaserReading) -> Option<MeasuredStep> {
     let reference = Reference::new(points_of(from));
     let moving = points_of(to);
     let guess = to.odometry.relative_to(&from.odometry);
@@ -230,13 +243,15 @@ pub(crate) fn match_scans(from: &LaserReading, to: &LaserReading) -> Option<Meas
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod room {
+    //! A scene for tests of scan matching: a rectangular room with pillars.
+
     use super::*;
 
     /// A scan of a rectangular room with half-sizes `half` and the robot
     /// at `pose` (room frame, centre at the origin), 360 beams over 360°,
     /// and square pillars 0.6 m wide at `pillars`.
-    fn scan_in_room(
+    pub(crate) fn scan_in_room(
         pose: Pose2,
         odometry: Pose2,
         half: (Real, Real),
@@ -296,6 +311,12 @@ mod tests {
             laser_offset: Pose2::IDENTITY,
         }
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use room::scan_in_room;
 
     #[test]
     fn recovers_the_motion_from_a_wrong_guess() {
