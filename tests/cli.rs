@@ -996,6 +996,28 @@ fn slam_learns_a_simulated_scan_latency_from_the_log() {
 }
 
 #[test]
+fn the_slip_guard_mends_simulated_wheel_slips() {
+    let dir = out_dir("sim-slips");
+    let d = |p: &str| dir.join(p).to_str().unwrap().to_string();
+    let out = squall(&["sim", "--duration", "300", "--seed", "5", "--slip-every", "60", "--out", &d("log")]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let log = d("log/sim.clf");
+    let error = |mend: &str| {
+        let out_dir = d(&format!("mend-{mend}"));
+        let set = format!("source.params.mend_slips={mend}");
+        let out = squall(&["slam", "--log", &log, "--quiet", "--set", &set, "--out", &out_dir]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let m = source_metrics(std::path::Path::new(&out_dir));
+        (relation_error(&dir.join(format!("mend-{mend}/trajectory.tum")), &dir.join("log/sim.relations")), m)
+    };
+    let ((mended, m), (kept, plain)) = (error("true"), error("false"));
+    assert!(m["slipped_steps"].as_u64().unwrap() > 20, "{m}");
+    assert!(plain.get("slipped_steps").is_none(), "off by default: {plain}");
+    assert!(mended < 0.5 * kept, "mended {mended} m, kept {kept} m");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn sim_odometry_quality_and_laser_flags_take_effect() {
     let dir = out_dir("sim-odometry");
     // Raw odometry's relation error for each quality, same seed and route.

@@ -24,6 +24,7 @@ pub mod odometry_track;
 pub mod random;
 pub mod scan_match;
 pub mod sensor;
+pub mod slip;
 pub mod textfile;
 pub mod trajectory;
 pub mod visibility;

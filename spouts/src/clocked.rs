@@ -2,6 +2,7 @@
 //! [`ScanClock`]'s decision is reported.
 
 use squall_core::clock::{PoseSource, ScanClock};
+use squall_core::slip::SlipGuard;
 use squall_topology::Emitter;
 
 /// The clock's decision in `metrics.json`: the offset applied
@@ -23,9 +24,22 @@ pub(crate) fn report_clock(clock: &ScanClock, emitted: u64, out: &mut Emitter) {
         PoseSource::ScanPoses => "scans_posed_from_scan_poses",
         PoseSource::AsLogged => "scans_posed_as_logged",
     };
-    let held = clock.held_as_logged();
-    out.count(source, emitted.saturating_sub(held));
+    let (held, flowed) = (clock.held_as_logged(), clock.flowed_as_logged());
+    out.count(source, emitted.saturating_sub(held + flowed));
+    if flowed > 0 {
+        out.count("scans_posed_as_logged_in_the_warmup", flowed);
+    }
     if held > 0 {
         out.count("scans_posed_as_logged_beyond_the_odometry", held);
+    }
+}
+
+/// The slip guard's counts in `metrics.json`: the steps it found slipped
+/// and mended (`slipped_steps`) of those it tested (`slip_tested_steps`).
+pub(crate) fn report_slips(guard: Option<&SlipGuard>, out: &mut Emitter) {
+    if let Some(g) = guard {
+        let (slips, steps) = g.counts();
+        out.count("slipped_steps", slips);
+        out.count("slip_tested_steps", steps);
     }
 }

@@ -109,6 +109,12 @@ pub(crate) fn odom_hz(s: &str) -> Result<f64, String> {
     bounds::real("", v, 0.0, 50.0, "messages a second", "the simulator's physics rate").map_err(expected)
 }
 
+/// The mean time between simulated wheel slips, seconds: [10, 10⁹].
+pub(crate) fn slip_every_secs(s: &str) -> Result<f64, String> {
+    let v = number(s)?;
+    bounds::real("", v, 10.0, MAX_SIM_SECS, "seconds", "a slip lasts up to 6 s").map_err(expected)
+}
+
 /// A systematic share of error: (-0.5, 0.5).
 pub(crate) fn error_share(s: &str) -> Result<f64, String> {
     let v = number(s)?;

@@ -62,6 +62,10 @@ pub(super) struct SimArgs {
     /// much).
     #[arg(long, default_value_t = 0.0, value_name = "SHARE", value_parser = super::numbers::error_share)]
     turn_scale_error: f64,
+    /// A wheel slip every this many seconds on average: for 2–6 s the
+    /// robot is held while its odometry drives on.
+    #[arg(long, value_name = "SECS", value_parser = super::numbers::slip_every_secs)]
+    slip_every: Option<f64>,
     /// The most memory the log may take while it is made (it is written
     /// whole when the run ends), MiB; the default is 90% of the
     /// machine's. A --duration whose log would not fit is refused before
@@ -89,6 +93,7 @@ pub(super) fn sim(args: &SimArgs) -> ExitCode {
             no_return_m: args.no_return,
             declared_range_m: args.declared_range,
             turn_scale_error: args.turn_scale_error,
+            slip_every_secs: args.slip_every,
         },
         ..SimConfig::default()
     };

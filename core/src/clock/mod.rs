@@ -10,6 +10,12 @@
 //! the odometry stream where the log has one (CARMEN `ODOM` lines, a bag's
 //! `/odom`), from the scans' own poses otherwise.
 //!
+//! A log read as fast as it goes holds its scans through the warm-up, so
+//! every scan gets the learnt offset. A source paced at the recorded rate
+//! (or live) cannot make its consumers wait: its scans flow with the poses
+//! the log attached until the offset is decided, and carry it from then on
+//! ([`ScanClock::flowing`]).
+//!
 //! It is a pure function of the order readings are handed to it, so a
 //! replayed log gives the same poses whatever the machine.
 
@@ -110,7 +116,7 @@ pub struct ClockReport {
     pub offset: f64,
     /// The estimate, where one was made.
     pub estimate: Option<ClockOffset>,
-    /// Scans the warm-up held.
+    /// Scans the warm-up took (held, or flowing with the logged poses).
     pub warmup_scans: usize,
 }
 
@@ -130,6 +136,12 @@ pub struct ScanClock {
     /// Scans given the logged pose because the track had none at their
     /// instant (beyond its ends).
     held_as_logged: u64,
+    /// Whether scans flow during the warm-up instead of being held.
+    flowing: bool,
+    /// Scans given out during a flowing warm-up, with the logged poses.
+    flowed_as_logged: u64,
+    /// The warm-up's scans: how many, and the first and last stamps.
+    warmup: (usize, Option<(f64, f64)>),
 }
 
 impl ScanClock {
@@ -155,7 +167,17 @@ impl ScanClock {
             decided,
             finished: false,
             held_as_logged: 0,
+            flowing: false,
+            flowed_as_logged: 0,
+            warmup: (0, None),
         }
+    }
+
+    /// A clock whose scans flow during the warm-up, with the poses the log
+    /// attached, rather than being held: for a source paced at the
+    /// recorded rate or live, whose consumers cannot wait.
+    pub fn flowing(mode: ClockMode) -> Self {
+        ScanClock { flowing: true, ..ScanClock::new(mode) }
     }
 
     /// An odometry message of the stream (out-of-order ones are ignored).
@@ -175,6 +197,9 @@ impl ScanClock {
         self.scan_poses.push(reading.stamp, reading.odometry);
         if self.decided.is_none() {
             self.learn_from(&reading);
+            let (count, span) = &mut self.warmup;
+            *count += 1;
+            *span = Some(span.map_or((reading.stamp, reading.stamp), |(first, _)| (first, reading.stamp)));
         }
         self.pending.push_back(reading);
         if self.decided.is_none() {
@@ -192,7 +217,14 @@ impl ScanClock {
 
     /// The next scan whose pose is decided, in order.
     pub fn next_ready(&mut self) -> Option<LaserReading> {
-        let decided = self.decided?;
+        let Some(decided) = self.decided else {
+            if !self.flowing {
+                return None;
+            }
+            let reading = self.pending.pop_front()?;
+            self.flowed_as_logged += 1;
+            return Some(reading);
+        };
         let front = self.pending.front()?;
         if decided.source == PoseSource::AsLogged {
             return self.pending.pop_front();
@@ -227,6 +259,11 @@ impl ScanClock {
         self.held_as_logged
     }
 
+    /// Scans given out with the logged pose during a flowing warm-up.
+    pub fn flowed_as_logged(&self) -> u64 {
+        self.flowed_as_logged
+    }
+
     /// Scans held now.
     pub fn pending(&self) -> usize {
         self.pending.len()
@@ -250,13 +287,13 @@ impl ScanClock {
     }
 
     fn try_to_decide(&mut self) {
-        let span =
-            self.pending.back().map_or(0.0, |b| b.stamp) - self.pending.front().map_or(0.0, |f| f.stamp);
+        let (count, span) = self.warmup;
+        let span = span.map_or(0.0, |(first, last)| last - first);
         // A known offset still waits a few scans, for the odometry stream
         // to show whether it covers them.
         let enough = match self.mode {
-            ClockMode::Auto => self.pending.len() >= WARMUP_SCANS || span >= WARMUP_SECS,
-            _ => self.pending.len() >= FIXED_WARMUP_SCANS,
+            ClockMode::Auto => count >= WARMUP_SCANS || span >= WARMUP_SECS,
+            _ => count >= FIXED_WARMUP_SCANS,
         };
         if enough {
             self.decide();
@@ -280,7 +317,7 @@ impl ScanClock {
     /// The odometry stream where it covers the scans held, the scans' own
     /// poses otherwise.
     fn track_choice(&self) -> (PoseSource, &OdometryTrack) {
-        let held = self.pending.front().zip(self.pending.back()).map(|(f, b)| (f.stamp, b.stamp));
+        let held = self.warmup.1;
         let covers = match (self.stream.span(), held) {
             (Some((first, last)), Some((a, b))) => {
                 self.stream.len() >= 2 && first <= a + 1.0 && last >= b - 1.0
@@ -295,7 +332,7 @@ impl ScanClock {
     }
 
     fn decide(&mut self) {
-        let warmup_scans = self.pending.len();
+        let warmup_scans = self.warmup.0;
         let report = match self.mode {
             ClockMode::Log => {
                 ClockReport { source: PoseSource::AsLogged, offset: 0.0, estimate: None, warmup_scans }

@@ -140,6 +140,37 @@ fn a_robot_that_never_turns_keeps_the_logged_poses() {
 }
 
 #[test]
+fn a_flowing_clock_gives_out_every_scan_at_once_and_the_offset_once_learnt() {
+    let lag = 0.08;
+    let mut clock = ScanClock::flowing(ClockMode::Auto);
+    let (mut given, mut late) = (Vec::new(), 0);
+    for r in log(80.0, lag, true) {
+        match r {
+            Reading::Odom(t, p) => clock.odometry(t, p),
+            Reading::Scan(s) => {
+                clock.scan(s);
+                let before = given.len();
+                given.extend(std::iter::from_fn(|| clock.next_ready()));
+                // Before the offset is decided, each scan comes out as it
+                // goes in; after, within the odometry's next message.
+                if given.len() == before {
+                    late += 1;
+                }
+            }
+        }
+    }
+    clock.finish();
+    given.extend(std::iter::from_fn(|| clock.next_ready()));
+    let report = clock.report().unwrap();
+    assert!((report.offset + lag).abs() < 0.005, "{report:?}");
+    assert!(late <= 1, "{late} scans waited");
+    // The warm-up's scans keep the logged poses, the later ones are right.
+    let warm = report.warmup_scans;
+    assert!(worst_heading_error(&given[..warm], lag) > 0.02);
+    assert!(worst_heading_error(&given[warm..], lag) < 0.01);
+}
+
+#[test]
 fn the_setting_takes_a_word_or_seconds() {
     let parse = |s: ClockSetting| ClockMode::try_from(s);
     assert_eq!(parse(ClockSetting::Word("auto".into())), Ok(ClockMode::Auto));

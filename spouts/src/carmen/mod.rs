@@ -17,6 +17,7 @@ use std::path::PathBuf;
 use serde::Deserialize;
 use squall_core::clock::{ClockMode, ScanClock};
 use squall_core::sensor::{LaserReading, Odometry};
+use squall_core::slip::SlipGuard;
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
 };
@@ -48,6 +49,10 @@ struct CarmenParams {
     /// `"auto"` (the default), `"log"` or seconds: see the module docs.
     #[serde(default)]
     clock_offset: ClockMode,
+    /// Mend steps where the wheels slipped ([`SlipGuard`]; off by
+    /// default: decision 0036 says why).
+    #[serde(default)]
+    mend_slips: bool,
 }
 
 /// Replays a CARMEN log.
@@ -59,6 +64,7 @@ pub struct CarmenSpout {
     max_scans: Option<u64>,
     reader: Option<LogReader>,
     clock: ScanClock,
+    slips: Option<SlipGuard>,
     /// Front scans read, and emitted.
     scans: u64,
     emitted: u64,
@@ -74,13 +80,22 @@ impl CarmenSpout {
         if !(range_max.is_finite() && range_max > 0.0) {
             return Err(ParamError::new("range_max must be a positive number of metres"));
         }
+        let pace = pace(params.rate.as_ref())?;
+        // Read as fast as it goes, the log's scans wait for the clock's
+        // warm-up; paced, they cannot.
+        let clock = if pace == Pace::Max {
+            ScanClock::new(params.clock_offset)
+        } else {
+            ScanClock::flowing(params.clock_offset)
+        };
         Ok(CarmenSpout {
-            pacer: Pacer::new(pace(params.rate.as_ref())?),
+            pacer: Pacer::new(pace),
             log: params.log,
             options: ReadOptions { default_range_max: range_max, skip_bad: params.skip_bad },
             max_scans: params.max_scans,
             reader: None,
-            clock: ScanClock::new(params.clock_offset),
+            clock,
+            slips: params.mend_slips.then(SlipGuard::new),
             emitted: 0,
             scans: 0,
             readings: ReadingCounter::default(),
@@ -102,6 +117,10 @@ impl CarmenSpout {
     /// Emits the front scans whose pose the clock has decided.
     async fn emit_ready(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         while let Some(reading) = self.clock.next_ready() {
+            let reading = match &mut self.slips {
+                Some(guard) => guard.mend(reading),
+                None => reading,
+            };
             self.readings.add(1);
             self.emitted += 1;
             out.emit("scan", reading).await?;
@@ -142,6 +161,7 @@ impl Spout for CarmenSpout {
                 self.clock.finish();
                 self.emit_ready(out).await?;
                 crate::clocked::report_clock(&self.clock, self.emitted, out);
+                crate::clocked::report_slips(self.slips.as_ref(), out);
                 return Ok(SpoutStatus::Done);
             }
             Some(r) => r?,

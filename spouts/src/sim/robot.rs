@@ -80,7 +80,15 @@ pub struct Faults {
     /// (0.05: it reports 5% more turning than the robot made), in
     /// (-0.5, 0.5).
     pub turn_scale_error: Real,
+    /// Wheel slips, one every this many seconds on average (none by
+    /// default): for 2–6 s the robot is held where it stands while its
+    /// wheels turn as commanded and the odometry drives on (FR079's robot
+    /// stood seven seconds while its odometry reported 0.55 m and −17°).
+    pub slip_every_secs: Option<Real>,
 }
+
+/// How long a wheel slip lasts, seconds.
+const SLIP_SECS: std::ops::Range<Real> = 2.0..6.0;
 
 /// The longest range a log may declare, metres (as `--range-max`).
 const MAX_DECLARED_RANGE: Real = 1000.0;
@@ -114,6 +122,11 @@ impl Faults {
             return fault(format!(
                 "the no-return code (no_return_m, --no-return) must lie beyond the laser's range ({range_max} m) and below the declared range ({declared} m: declared_range_m, --declared-range), got {code}"
             ));
+        }
+        if let Some(every) = self.slip_every_secs
+            && !(every.is_finite() && every >= 10.0)
+        {
+            return fault(format!("slip_every_secs must be at least 10 s, got {every}"));
         }
         if self.turn_scale_error.is_nan() || self.turn_scale_error.abs() >= 0.5 {
             return fault(format!("turn_scale_error must be in (-0.5, 0.5), got {}", self.turn_scale_error));
@@ -345,6 +358,11 @@ pub struct Simulation {
     node_visits: Vec<u32>,
     plan: VecDeque<usize>,
     route_rng: ChaCha8Rng,
+    slip_rng: ChaCha8Rng,
+    /// Physics steps left of the wheel slip under way.
+    slipping: u64,
+    /// Wheel slips so far.
+    slips: u64,
     odom_rng: ChaCha8Rng,
     laser_rng: ChaCha8Rng,
     /// Relative error of the odometry's distance (systematic).
@@ -421,6 +439,9 @@ impl Simulation {
         Ok(Simulation {
             steps: (config.duration_secs * PHYSICS_HZ) as u64,
             route_rng: stream_for_purpose(config.seed, "route"),
+            slip_rng: stream_for_purpose(config.seed, "wheel slip"),
+            slipping: 0,
+            slips: 0,
             odom_rng: stream_for_purpose(config.seed, "odometry noise"),
             laser_rng: stream_for_purpose(config.seed, "laser noise"),
             odometry: truth,
@@ -443,6 +464,11 @@ impl Simulation {
             steps_per_odom,
             carried: None,
         })
+    }
+
+    /// Wheel slips so far.
+    pub fn slips(&self) -> u64 {
+        self.slips
     }
 
     /// The floor being simulated.
@@ -592,7 +618,19 @@ impl Simulation {
         let turn = (2.0 * error).clamp(-self.config.max_turn, self.config.max_turn);
         let speed = self.config.max_speed * error.cos().max(0.0).powi(4);
         let (d_trans, d_rot) = (speed * dt, turn * dt);
-        self.truth = self.truth.compose(&Pose2::new(d_trans, 0.0, d_rot));
+        if let Some(every) = self.config.faults.slip_every_secs
+            && self.slipping == 0
+            && self.slip_rng.random_bool((dt / every).min(1.0))
+        {
+            self.slipping = (self.slip_rng.random_range(SLIP_SECS) * PHYSICS_HZ) as u64;
+            self.slips += 1;
+        }
+        if self.slipping > 0 {
+            // Held: the wheels turn, the robot does not.
+            self.slipping -= 1;
+        } else {
+            self.truth = self.truth.compose(&Pose2::new(d_trans, 0.0, d_rot));
+        }
         let rng = &mut self.odom_rng;
         let e = &self.errors;
         let o_trans =
@@ -769,6 +807,7 @@ mod tests {
             no_return_m: Some(51.1),
             declared_range_m: Some(80.0),
             turn_scale_error: 0.05,
+            slip_every_secs: None,
         };
         let config = SimConfig { seed: 2, duration_secs: 120.0, faults, ..SimConfig::default() };
         let events: Vec<SimEvent> = Simulation::new(office(1, 3, 2), config).unwrap().collect();

@@ -7,6 +7,7 @@ use std::collections::VecDeque;
 use serde::Deserialize;
 use squall_core::clock::{ClockMode, ScanClock};
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
+use squall_core::slip::SlipGuard;
 use squall_topology::bounds::{MemoryBudget, OverBudget};
 use squall_topology::spec::readable_number;
 use squall_topology::{
@@ -52,6 +53,9 @@ struct P {
     /// How scans are timed against the odometry: `"auto"` (the default),
     /// `"log"` or seconds, as the log sources ([`ClockMode`]).
     clock_offset: ClockMode,
+    /// Mend steps where the wheels slipped, as the log sources (off by
+    /// default).
+    mend_slips: bool,
 }
 
 impl Default for P {
@@ -69,6 +73,7 @@ impl Default for P {
             kidnap: None,
             faults: Faults::default(),
             clock_offset: ClockMode::default(),
+            mend_slips: false,
         }
     }
 }
@@ -106,6 +111,7 @@ pub struct SimSpout {
     config: SimConfig,
     sim: Option<Simulation>,
     clock: ScanClock,
+    slips: Option<SlipGuard>,
     /// The true poses of the scans the clock holds, in order.
     truths: VecDeque<PoseStamped>,
     emitted: u64,
@@ -138,7 +144,9 @@ impl SimSpout {
             scans: 0,
             config,
             sim: None,
-            clock: ScanClock::new(params.clock_offset),
+            // A simulated robot is live: its scans flow through the warm-up.
+            clock: ScanClock::flowing(params.clock_offset),
+            slips: params.mend_slips.then(SlipGuard::new),
             truths: VecDeque::new(),
             emitted: 0,
             readings: ReadingCounter::default(),
@@ -171,6 +179,7 @@ impl Spout for SimSpout {
                 self.clock.finish();
                 self.emit_ready(out).await?;
                 crate::clocked::report_clock(&self.clock, self.emitted, out);
+                crate::clocked::report_slips(self.slips.as_ref(), out);
                 return Ok(SpoutStatus::Done);
             }
             Some(SimEvent::Odom(o)) => {
@@ -193,6 +202,10 @@ impl SimSpout {
     /// true pose.
     async fn emit_ready(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
         while let Some(scan) = self.clock.next_ready() {
+            let scan = match &mut self.slips {
+                Some(guard) => guard.mend(scan),
+                None => scan,
+            };
             let truth = self.truths.pop_front().ok_or("a scan without its true pose")?;
             self.readings.add(1);
             self.emitted += 1;
