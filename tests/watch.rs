@@ -461,6 +461,10 @@ fn a_foxglove_viewer_that_stops_reading_is_dropped_not_awaited() {
     // viewer's socket buffers hold, so the close cannot reach it.
     let child = Command::new(env!("CARGO_BIN_EXE_squall"))
         .args(["slam", "--log", &shared_data("laser/aces.clf"), "--foxglove", "127.0.0.1:0", "--quiet"])
+        // Paced (100 times the log's rate, 14 s), so that the scans flow
+        // from the start while the viewer is subscribed, not in one burst
+        // after the source's clock has learnt its offset.
+        .args(["--set", "source.params.rate=100"])
         .args(["--out", out.to_str().unwrap()])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(Stdio::piped())

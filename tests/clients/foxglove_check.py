@@ -106,10 +106,15 @@ def stall(url, secs):
             header += bytes([0x80 | 126]) + struct.pack(">H", len(payload))
         sock.sendall(header + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
 
-    subscribed = 0
+    # Subscribe to what is advertised until the scans are (a source may
+    # hold its first scans while it learns its laser's clock, and the view
+    # advertises a topic with its first message), then a second more.
+    subscribed, topics = 0, set()
     sock.settimeout(0.2)
-    end = time.monotonic() + 1.0
+    end = time.monotonic() + 30.0
     while time.monotonic() < end:
+        if "/scan" in topics:
+            end = min(end, time.monotonic() + 1.0)
         try:
             buffer += sock.recv(65536)
         except socket.timeout:
@@ -129,6 +134,7 @@ def stall(url, secs):
             frame, buffer = buffer[at:at + length], buffer[at + length:]
             if opcode == 0x1 and json.loads(frame).get("op") == "advertise":
                 channels = json.loads(frame)["channels"]
+                topics.update(c["topic"] for c in channels)
                 subscriptions = [{"id": subscribed + i + 1, "channelId": c["id"]} for i, c in enumerate(channels)]
                 subscribed += len(subscriptions)
                 send_text(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))

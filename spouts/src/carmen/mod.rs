@@ -49,10 +49,14 @@ struct CarmenParams {
     /// `"auto"` (the default), `"log"` or seconds: see the module docs.
     #[serde(default)]
     clock_offset: ClockMode,
-    /// Mend steps where the wheels slipped ([`SlipGuard`]; off by
-    /// default: decision 0036 says why).
-    #[serde(default)]
+    /// Mend steps where the wheels slipped ([`SlipGuard`]; the default:
+    /// true).
+    #[serde(default = "mend_slips_by_default")]
     mend_slips: bool,
+}
+
+fn mend_slips_by_default() -> bool {
+    true
 }
 
 /// Replays a CARMEN log.
