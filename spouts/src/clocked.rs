@@ -1,15 +1,65 @@
-//! What the sources share about timing their scans: how the
-//! [`ScanClock`]'s decision is reported.
+//! What the sources do to their front scans on the way out: pose each at
+//! the instant it was measured ([`ScanClock`]) and, where asked, mend the
+//! steps where the wheels slipped ([`SlipGuard`]); and how they report it.
 
 use squall_core::clock::{PoseSource, ScanClock};
+use squall_core::geometry::Pose2;
+use squall_core::sensor::LaserReading;
 use squall_core::slip::SlipGuard;
 use squall_topology::Emitter;
+
+/// A source's front scans between the reader and the stream.
+#[derive(Debug)]
+pub(crate) struct ScanConditioner {
+    clock: ScanClock,
+    slips: Option<SlipGuard>,
+    /// Scans given out.
+    emitted: u64,
+}
+
+impl ScanConditioner {
+    /// Scans timed by `clock`, their slips mended if `mend_slips`.
+    pub(crate) fn new(clock: ScanClock, mend_slips: bool) -> Self {
+        ScanConditioner { clock, slips: mend_slips.then(SlipGuard::new), emitted: 0 }
+    }
+
+    /// An odometry message of the stream.
+    pub(crate) fn odometry(&mut self, stamp: f64, pose: Pose2) {
+        self.clock.odometry(stamp, pose);
+    }
+
+    /// A front scan as read.
+    pub(crate) fn scan(&mut self, reading: LaserReading) {
+        self.clock.scan(reading);
+    }
+
+    /// The end of the input: every held scan is ready.
+    pub(crate) fn finish(&mut self) {
+        self.clock.finish();
+    }
+
+    /// The next scan ready to go out, in order.
+    pub(crate) fn next_ready(&mut self) -> Option<LaserReading> {
+        let reading = self.clock.next_ready()?;
+        self.emitted += 1;
+        Some(match &mut self.slips {
+            Some(guard) => guard.mend(reading),
+            None => reading,
+        })
+    }
+
+    /// What was decided and mended, in `metrics.json`.
+    pub(crate) fn report(&self, out: &mut Emitter) {
+        report_clock(&self.clock, self.emitted, out);
+        report_slips(self.slips.as_ref(), out);
+    }
+}
 
 /// The clock's decision in `metrics.json`: the offset applied
 /// (`clock_offset_ms`), the estimate's standard error and the odometry's
 /// turn scale where one was made, and the scans counted by where their
 /// pose came from (`emitted` of them in all).
-pub(crate) fn report_clock(clock: &ScanClock, emitted: u64, out: &mut Emitter) {
+fn report_clock(clock: &ScanClock, emitted: u64, out: &mut Emitter) {
     let Some(report) = clock.report() else { return };
     out.measured("clock_offset_ms", 1e3 * report.offset);
     if let Some(e) = report.estimate {
@@ -36,7 +86,7 @@ pub(crate) fn report_clock(clock: &ScanClock, emitted: u64, out: &mut Emitter) {
 
 /// The slip guard's counts in `metrics.json`: the steps it found slipped
 /// and mended (`slipped_steps`) of those it tested (`slip_tested_steps`).
-pub(crate) fn report_slips(guard: Option<&SlipGuard>, out: &mut Emitter) {
+fn report_slips(guard: Option<&SlipGuard>, out: &mut Emitter) {
     if let Some(g) = guard {
         let (slips, steps) = g.counts();
         out.count("slipped_steps", slips);

@@ -17,7 +17,6 @@ use std::path::PathBuf;
 use serde::Deserialize;
 use squall_core::clock::{ClockMode, ScanClock};
 use squall_core::sensor::{LaserReading, Odometry};
-use squall_core::slip::SlipGuard;
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
 };
@@ -25,6 +24,7 @@ use squall_topology::{
 pub use parse::{Laser, LineParser, Record, RecordError};
 pub use reader::{LogError, LogReader, ReadOptions, count_front_scans, read_front_scans, read_log};
 
+use crate::clocked::ScanConditioner;
 pub use crate::pace::Pace;
 use crate::pace::{Pacer, pace};
 
@@ -67,11 +67,10 @@ pub struct CarmenSpout {
     options: ReadOptions,
     max_scans: Option<u64>,
     reader: Option<LogReader>,
-    clock: ScanClock,
-    slips: Option<SlipGuard>,
-    /// Front scans read, and emitted.
+    /// The front scans on their way out.
+    front: ScanConditioner,
+    /// Front scans read.
     scans: u64,
-    emitted: u64,
     /// Front scans emitted, for the progress display.
     readings: ReadingCounter,
 }
@@ -98,9 +97,7 @@ impl CarmenSpout {
             options: ReadOptions { default_range_max: range_max, skip_bad: params.skip_bad },
             max_scans: params.max_scans,
             reader: None,
-            clock,
-            slips: params.mend_slips.then(SlipGuard::new),
-            emitted: 0,
+            front: ScanConditioner::new(clock, params.mend_slips),
             scans: 0,
             readings: ReadingCounter::default(),
         })
@@ -120,13 +117,8 @@ impl CarmenSpout {
 impl CarmenSpout {
     /// Emits the front scans whose pose the clock has decided.
     async fn emit_ready(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
-        while let Some(reading) = self.clock.next_ready() {
-            let reading = match &mut self.slips {
-                Some(guard) => guard.mend(reading),
-                None => reading,
-            };
+        while let Some(reading) = self.front.next_ready() {
             self.readings.add(1);
-            self.emitted += 1;
             out.emit("scan", reading).await?;
         }
         Ok(())
@@ -162,10 +154,9 @@ impl Spout for CarmenSpout {
                 let (skipped, other) = (reader.skipped(), reader.other_records().values().sum());
                 out.count("records_skipped", skipped);
                 out.count("records_other_types", other);
-                self.clock.finish();
+                self.front.finish();
                 self.emit_ready(out).await?;
-                crate::clocked::report_clock(&self.clock, self.emitted, out);
-                crate::clocked::report_slips(self.slips.as_ref(), out);
+                self.front.report(out);
                 return Ok(SpoutStatus::Done);
             }
             Some(r) => r?,
@@ -178,7 +169,7 @@ impl Spout for CarmenSpout {
                 match laser {
                     Laser::Front => {
                         self.scans += 1;
-                        self.clock.scan(reading);
+                        self.front.scan(reading);
                     }
                     Laser::Rear => out.emit("rear_scan", reading).await?,
                 }
@@ -187,7 +178,7 @@ impl Spout for CarmenSpout {
                 if !self.wait_for(odom.stamp).await? {
                     return Ok(SpoutStatus::Continue);
                 }
-                self.clock.odometry(odom.stamp, odom.pose);
+                self.front.odometry(odom.stamp, odom.pose);
                 out.emit("odom", odom).await?;
             }
             Record::Param(..) | Record::Other(_) => {}

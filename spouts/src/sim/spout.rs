@@ -7,12 +7,13 @@ use std::collections::VecDeque;
 use serde::Deserialize;
 use squall_core::clock::{ClockMode, ScanClock};
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
-use squall_core::slip::SlipGuard;
 use squall_topology::bounds::{MemoryBudget, OverBudget};
 use squall_topology::spec::readable_number;
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
 };
+
+use crate::clocked::ScanConditioner;
 
 use super::robot::{Faults, Kidnap, OdometryQuality, SimConfig, SimEvent, Simulation, Start};
 use super::{DEFAULT_WORLD, laser_range_for, top_speed_for};
@@ -110,11 +111,10 @@ pub struct SimSpout {
     scans: u64,
     config: SimConfig,
     sim: Option<Simulation>,
-    clock: ScanClock,
-    slips: Option<SlipGuard>,
+    /// The scans on their way out.
+    front: ScanConditioner,
     /// The true poses of the scans the clock holds, in order.
     truths: VecDeque<PoseStamped>,
-    emitted: u64,
     /// Scans emitted, for the progress display.
     readings: ReadingCounter,
 }
@@ -145,10 +145,8 @@ impl SimSpout {
             config,
             sim: None,
             // A simulated robot is live: its scans flow through the warm-up.
-            clock: ScanClock::flowing(params.clock_offset),
-            slips: params.mend_slips.then(SlipGuard::new),
+            front: ScanConditioner::new(ScanClock::flowing(params.clock_offset), params.mend_slips),
             truths: VecDeque::new(),
-            emitted: 0,
             readings: ReadingCounter::default(),
         })
     }
@@ -176,20 +174,19 @@ impl Spout for SimSpout {
         let event = if self.max_scans.is_some_and(|m| self.scans >= m) { None } else { sim.next() };
         match event {
             None => {
-                self.clock.finish();
+                self.front.finish();
                 self.emit_ready(out).await?;
-                crate::clocked::report_clock(&self.clock, self.emitted, out);
-                crate::clocked::report_slips(self.slips.as_ref(), out);
+                self.front.report(out);
                 return Ok(SpoutStatus::Done);
             }
             Some(SimEvent::Odom(o)) => {
-                self.clock.odometry(o.stamp, o.pose);
+                self.front.odometry(o.stamp, o.pose);
                 out.emit("odom", o).await?;
             }
             Some(SimEvent::Scan(scan, truth)) => {
                 self.scans += 1;
                 self.truths.push_back(PoseStamped { stamp: scan.stamp, pose: truth });
-                self.clock.scan(scan);
+                self.front.scan(scan);
             }
         }
         self.emit_ready(out).await?;
@@ -201,14 +198,9 @@ impl SimSpout {
     /// Emits the scans whose pose the clock has decided, each with its
     /// true pose.
     async fn emit_ready(&mut self, out: &mut Emitter) -> Result<(), BoxError> {
-        while let Some(scan) = self.clock.next_ready() {
-            let scan = match &mut self.slips {
-                Some(guard) => guard.mend(scan),
-                None => scan,
-            };
+        while let Some(scan) = self.front.next_ready() {
             let truth = self.truths.pop_front().ok_or("a scan without its true pose")?;
             self.readings.add(1);
-            self.emitted += 1;
             out.emit("scan", scan).await?;
             out.emit("truth", truth).await?;
         }
