@@ -4,11 +4,12 @@
 //! A scan's pose must be the odometry at the instant the laser measured
 //! it, which is rarely a message's stamp, and on real robots not even the
 //! scan's own stamp (the two sensors' clocks and latencies differ:
-//! squall-bolts' `sensor::clock`). Sources that carry the odometry stream
+//! [`crate::clock`]). Sources that carry the odometry stream
 //! (CARMEN `ODOM` lines, a bag's `/odom`) keep it here and ask it for the
 //! pose at each scan's instant.
 
-use crate::geometry::{Pose2, Real, normalize_angle};
+use crate::geometry::{Pose2, normalize_angle};
+use crate::sensor::Odometry;
 
 /// How far (s) before the first or after the last message a pose is
 /// still given (held at that message's); farther, none is.
@@ -23,11 +24,30 @@ pub fn interpolate_pose(ta: f64, a: &Pose2, tb: f64, b: &Pose2, t: f64) -> Pose2
     Pose2::new(a.x + f * (b.x - a.x), a.y + f * (b.y - a.y), a.theta + f * normalize_angle(b.theta - a.theta))
 }
 
-/// Odometry poses in stamp order.
+/// The pose at `t` of `odometry` (messages in stamp order): interpolated
+/// between the messages around it, held at the first or last within
+/// [`MAX_EXTRAPOLATION`] of them, `None` farther out (or for a `t` that is
+/// not finite).
+pub fn pose_at(odometry: &[Odometry], t: f64) -> Option<Pose2> {
+    let (first, last) = (odometry.first()?, odometry.last()?);
+    if !t.is_finite() {
+        return None;
+    }
+    if t <= first.stamp {
+        return (first.stamp - t <= MAX_EXTRAPOLATION).then_some(first.pose);
+    }
+    if t >= last.stamp {
+        return (t - last.stamp <= MAX_EXTRAPOLATION).then_some(last.pose);
+    }
+    let i = odometry.partition_point(|o| o.stamp <= t);
+    let (a, b) = (&odometry[i - 1], &odometry[i]);
+    Some(interpolate_pose(a.stamp, &a.pose, b.stamp, &b.pose, t))
+}
+
+/// Odometry messages in stamp order.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct OdometryTrack {
-    stamps: Vec<f64>,
-    poses: Vec<Pose2>,
+    messages: Vec<Odometry>,
 }
 
 impl OdometryTrack {
@@ -40,67 +60,44 @@ impl OdometryTrack {
     /// refused (`false`): a stream out of order has no pose at an instant.
     /// One stamped as the last replaces it.
     pub fn push(&mut self, stamp: f64, pose: Pose2) -> bool {
-        if !stamp.is_finite() || self.stamps.last().is_some_and(|&last| stamp < last) {
+        if !stamp.is_finite() || self.messages.last().is_some_and(|last| stamp < last.stamp) {
             return false;
         }
-        if self.stamps.last() == Some(&stamp) {
-            *self.poses.last_mut().expect("a stamp has its pose") = pose;
-        } else {
-            self.stamps.push(stamp);
-            self.poses.push(pose);
+        let message = Odometry { stamp, pose, linear_velocity: 0.0, angular_velocity: 0.0 };
+        match self.messages.last_mut() {
+            Some(last) if last.stamp == stamp => *last = message,
+            _ => self.messages.push(message),
         }
         true
     }
 
     /// Messages held.
     pub fn len(&self) -> usize {
-        self.stamps.len()
+        self.messages.len()
     }
 
     /// Whether no message is held.
     pub fn is_empty(&self) -> bool {
-        self.stamps.is_empty()
+        self.messages.is_empty()
     }
 
     /// The first and last stamps.
     pub fn span(&self) -> Option<(f64, f64)> {
-        Some((*self.stamps.first()?, *self.stamps.last()?))
+        Some((self.messages.first()?.stamp, self.messages.last()?.stamp))
     }
 
-    /// The pose at `t`: interpolated between the messages around it, held
-    /// at the first or last within [`MAX_EXTRAPOLATION`] of them, `None`
-    /// farther out.
+    /// The pose at `t` ([`pose_at`]).
     pub fn at(&self, t: f64) -> Option<Pose2> {
-        let (first, last) = self.span()?;
-        if !t.is_finite() {
-            return None;
-        }
-        if t <= first {
-            return (first - t <= MAX_EXTRAPOLATION).then_some(self.poses[0]);
-        }
-        if t >= last {
-            return (t - last <= MAX_EXTRAPOLATION).then(|| *self.poses.last().expect("not empty"));
-        }
-        let i = self.stamps.partition_point(|&s| s <= t);
-        Some(interpolate_pose(self.stamps[i - 1], &self.poses[i - 1], self.stamps[i], &self.poses[i], t))
-    }
-
-    /// The heading at `t`, unwrapped against `near` (the result differs
-    /// from `near` by at most half a turn): for differences of headings
-    /// across a turn.
-    pub fn heading_near(&self, t: f64, near: Real) -> Option<Real> {
-        let theta = self.at(t)?.theta;
-        Some(near + normalize_angle(theta - near))
+        pose_at(&self.messages, t)
     }
 
     /// Drops the messages stamped before `t` except the last of them, so
     /// that [`Self::at`] still answers from `t` on: a live stream's track
     /// stays bounded.
     pub fn forget_before(&mut self, t: f64) {
-        let keep_from = self.stamps.partition_point(|&s| s < t).saturating_sub(1);
+        let keep_from = self.messages.partition_point(|m| m.stamp < t).saturating_sub(1);
         if keep_from > 0 {
-            self.stamps.drain(..keep_from);
-            self.poses.drain(..keep_from);
+            self.messages.drain(..keep_from);
         }
     }
 }
@@ -108,6 +105,7 @@ impl OdometryTrack {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Real;
 
     fn track(samples: &[(f64, Real, Real)]) -> OdometryTrack {
         let mut t = OdometryTrack::new();
@@ -144,12 +142,5 @@ mod tests {
         t.forget_before(2.5);
         assert_eq!(t.len(), 3);
         assert!((t.at(2.5).unwrap().x - 1.5).abs() < 1e-12);
-    }
-
-    #[test]
-    fn headings_unwrap_against_a_reference() {
-        let t = track(&[(0.0, 0.0, 3.0), (1.0, 0.0, -3.0)]);
-        let h = t.heading_near(1.0, 3.0).unwrap();
-        assert!((h - (2.0 * std::f64::consts::PI - 3.0)).abs() < 1e-12, "{h}");
     }
 }

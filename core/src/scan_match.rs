@@ -191,9 +191,14 @@ fn points_of(scan: &LaserReading) -> Vec<(Real, Real)> {
 /// best lays `to`'s scan onto `from`'s, starting from the odometry's, with
 /// its covariance; `None` where too few points pair up.
 pub fn match_scans(from: &LaserReading, to: &LaserReading) -> Option<MeasuredStep> {
+    match_scans_from(from, to, to.odometry.relative_to(&from.odometry))
+}
+
+/// As [`match_scans`], starting from `guess` (the motion in `from`'s
+/// frame) instead of the odometry's.
+pub fn match_scans_from(from: &LaserReading, to: &LaserReading, guess: Pose2) -> Option<MeasuredStep> {
     let reference = Reference::new(points_of(from));
     let moving = points_of(to);
-    let guess = to.odometry.relative_to(&from.odometry);
     let (mut x, mut y, mut theta) = (guess.x, guess.y, guess.theta);
     let mut last = None;
     for iteration in 0..ITERATIONS {

@@ -31,7 +31,7 @@
 use crate::covariance::{Mat3, add, apply, inverse, quadratic};
 use crate::geometry::{Pose2, Real, normalize_angle};
 use crate::motion::{MotionNoise, step_deviations};
-use crate::scan_match::{MeasuredStep, match_scans};
+use crate::scan_match::{MeasuredStep, match_scans, match_scans_from};
 use crate::sensor::LaserReading;
 
 /// χ² with three degrees of freedom at 0.999.
@@ -118,9 +118,7 @@ impl SlipGuard {
 /// does.
 fn consistent(before: &LaserReading, first: &MeasuredStep, second: &MeasuredStep, to: &LaserReading) -> bool {
     let chained = first.motion.compose(&second.motion);
-    let mut guess = to.clone();
-    guess.odometry = before.odometry.compose(&chained);
-    let Some(direct) = match_scans(before, &guess) else { return false };
+    let Some(direct) = match_scans_from(before, to, chained) else { return false };
     let r = direct.motion.relative_to(&chained);
     r.x.hypot(r.y) <= CYCLE.0 && normalize_angle(r.theta).abs() <= CYCLE.1
 }

@@ -194,7 +194,11 @@ impl ScanClock {
             self.pending.push_back(reading);
             return;
         }
-        self.scan_poses.push(reading.stamp, reading.odometry);
+        // The scans' own poses are a track while it may be chosen, and
+        // once it is.
+        if self.decided.is_none_or(|d| d.source == PoseSource::ScanPoses) {
+            self.scan_poses.push(reading.stamp, reading.odometry);
+        }
         if self.decided.is_none() {
             self.learn_from(&reading);
             let (count, span) = &mut self.warmup;
@@ -262,11 +266,6 @@ impl ScanClock {
     /// Scans given out with the logged pose during a flowing warm-up.
     pub fn flowed_as_logged(&self) -> u64 {
         self.flowed_as_logged
-    }
-
-    /// Scans held now.
-    pub fn pending(&self) -> usize {
-        self.pending.len()
     }
 
     fn learn_from(&mut self, reading: &LaserReading) {

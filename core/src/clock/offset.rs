@@ -103,8 +103,14 @@ impl ClockOffset {
 }
 
 /// The robust misfit of `pairs` at offset `delta`, with the scale fitted.
-fn misfit(pairs: &[TurnPair], track: &OdometryTrack, delta: f64) -> Option<(Real, Real, usize)> {
-    let mut reported = Vec::with_capacity(pairs.len());
+/// `reported` is scratch space, reused across the offsets searched.
+fn misfit(
+    pairs: &[TurnPair],
+    track: &OdometryTrack,
+    delta: f64,
+    reported: &mut Vec<(Real, Real)>,
+) -> Option<(Real, Real, usize)> {
+    reported.clear();
     for p in pairs {
         let a = track.at(p.from + delta);
         let b = track.at(p.to + delta);
@@ -168,10 +174,11 @@ const MIN_BATCH: usize = 40;
 /// standard error.
 fn best_offset(pairs: &[TurnPair], track: &OdometryTrack) -> Option<ClockOffset> {
     let steps = (MAX_OFFSET / STEP).round() as i64;
+    let mut reported = Vec::with_capacity(pairs.len());
     let grid: Vec<(f64, Real, Real, usize)> = (-steps..=steps)
         .filter_map(|k| {
             let delta = k as f64 * STEP;
-            misfit(pairs, track, delta).map(|(c, s, n)| (delta, c, s, n))
+            misfit(pairs, track, delta, &mut reported).map(|(c, s, n)| (delta, c, s, n))
         })
         .collect();
     // Compare offsets on the same pairs only: near the search's ends the

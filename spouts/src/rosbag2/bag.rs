@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use squall_core::geometry::Pose2;
-use squall_core::odometry_track::interpolate_pose;
 use squall_core::sensor::{LaserReading, Odometry};
 
 use super::cdr::CdrError;
@@ -666,20 +665,8 @@ impl Collector {
 }
 
 /// The odometry pose at `t`, linear in position and along the shorter arc in
-/// heading between the two messages around it.
-pub fn interpolate(odometry: &[Odometry], t: f64) -> Option<Pose2> {
-    let first = odometry.first()?;
-    let last = odometry.last()?;
-    if t <= first.stamp {
-        return (first.stamp - t <= MAX_EXTRAPOLATION).then_some(first.pose);
-    }
-    if t >= last.stamp {
-        return (t - last.stamp <= MAX_EXTRAPOLATION).then_some(last.pose);
-    }
-    let i = odometry.partition_point(|o| o.stamp <= t);
-    let (a, b) = (&odometry[i - 1], &odometry[i]);
-    Some(interpolate_pose(a.stamp, &a.pose, b.stamp, &b.pose, t))
-}
+/// heading between the two messages around it (the odometry track's).
+pub use squall_core::odometry_track::pose_at as interpolate;
 
 #[cfg(test)]
 mod tests {
