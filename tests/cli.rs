@@ -995,6 +995,61 @@ fn slam_learns_a_simulated_scan_latency_from_the_log() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Width × height of a PGM map, from its header.
+fn pgm_size(path: &std::path::Path) -> (u64, u64) {
+    let text = String::from_utf8_lossy(&std::fs::read(path).unwrap()).into_owned();
+    let mut fields = text.lines().skip(1).filter(|l| !l.starts_with('#')).flat_map(str::split_whitespace);
+    let mut next = || fields.next().unwrap().parse::<u64>().unwrap();
+    (next(), next())
+}
+
+#[test]
+fn slam_finds_a_simulated_no_return_code_below_the_declared_range() {
+    let dir = out_dir("sim-no-return");
+    let d = |p: &str| dir.join(p).to_str().unwrap().to_string();
+    // No return written as 51.08 m ± 4 cm, the log declaring 80 m.
+    let out = squall(&[
+        "sim",
+        "--duration",
+        "200",
+        "--seed",
+        "4",
+        "--no-return",
+        "51.08",
+        "--declared-range",
+        "80",
+        "--out",
+        &d("log"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let log = d("log/sim.clf");
+    let slam = |mode: &str| {
+        let out_dir = d(&format!("slam-{mode}"));
+        let set = format!("source.params.no_return=\"{mode}\"");
+        let out = squall(&["slam", "--log", &log, "--quiet", "--set", &set, "--out", &out_dir]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::path::PathBuf::from(out_dir)
+    };
+    let found = slam("auto");
+    let m = source_metrics(&found);
+    assert_eq!(m["no_return_codes"], 1, "{m}");
+    let (from, to) =
+        (m["no_return_code_1_from_m"].as_f64().unwrap(), m["no_return_code_1_to_m"].as_f64().unwrap());
+    assert!((51.0..=51.04).contains(&from) && (51.12..=51.2).contains(&to), "{m}");
+    assert!(m["no_return_readings_marked"].as_u64().unwrap() > 0, "{m}");
+    // Taken at its word, the log's code draws walls 51 m out and the map
+    // grows to hold them; with the code found, it holds the office.
+    let declared = slam("declared");
+    assert!(source_metrics(&declared).get("no_return_codes").is_none());
+    let (w_found, h_found) = pgm_size(&found.join("map.pgm"));
+    let (w_declared, h_declared) = pgm_size(&declared.join("map.pgm"));
+    assert!(
+        w_found * h_found * 2 < w_declared * h_declared,
+        "found {w_found}×{h_found}, declared {w_declared}×{h_declared}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn the_slip_guard_mends_simulated_wheel_slips() {
     let dir = out_dir("sim-slips");

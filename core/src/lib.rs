@@ -19,6 +19,7 @@ pub mod interior;
 pub mod linemap;
 pub mod map_files;
 pub mod motion;
+pub mod no_return;
 pub mod occupancy;
 pub mod odometry_track;
 pub mod random;

@@ -1,9 +1,12 @@
-//! What the sources do to their front scans on the way out: pose each at
-//! the instant it was measured ([`ScanClock`]) and, where asked, mend the
-//! steps where the wheels slipped ([`SlipGuard`]); and how they report it.
+//! What the sources do to their front scans on the way out: mark the
+//! readings the laser wrote for "no return" as such ([`NoReturnCodes`]),
+//! pose each scan at the instant it was measured ([`ScanClock`]) and,
+//! where asked, mend the steps where the wheels slipped ([`SlipGuard`]);
+//! and how they report it.
 
 use squall_core::clock::{PoseSource, ScanClock};
 use squall_core::geometry::Pose2;
+use squall_core::no_return::{NoReturnCodes, NoReturnMode};
 use squall_core::sensor::LaserReading;
 use squall_core::slip::SlipGuard;
 use squall_topology::Emitter;
@@ -11,6 +14,7 @@ use squall_topology::Emitter;
 /// A source's front scans between the reader and the stream.
 #[derive(Debug)]
 pub(crate) struct ScanConditioner {
+    codes: NoReturnCodes,
     clock: ScanClock,
     slips: Option<SlipGuard>,
     /// Scans given out.
@@ -18,9 +22,15 @@ pub(crate) struct ScanConditioner {
 }
 
 impl ScanConditioner {
-    /// Scans timed by `clock`, their slips mended if `mend_slips`.
-    pub(crate) fn new(clock: ScanClock, mend_slips: bool) -> Self {
-        ScanConditioner { clock, slips: mend_slips.then(SlipGuard::new), emitted: 0 }
+    /// Scans whose no-return readings are found as `no_return` says,
+    /// timed by `clock`, their slips mended if `mend_slips`.
+    pub(crate) fn new(no_return: &NoReturnMode, clock: ScanClock, mend_slips: bool) -> Self {
+        ScanConditioner {
+            codes: NoReturnCodes::new(no_return),
+            clock,
+            slips: mend_slips.then(SlipGuard::new),
+            emitted: 0,
+        }
     }
 
     /// An odometry message of the stream.
@@ -29,7 +39,9 @@ impl ScanConditioner {
     }
 
     /// A front scan as read.
-    pub(crate) fn scan(&mut self, reading: LaserReading) {
+    pub(crate) fn scan(&mut self, mut reading: LaserReading) {
+        self.codes.observe(&reading);
+        self.codes.mark(&mut reading);
         self.clock.scan(reading);
     }
 
@@ -40,7 +52,9 @@ impl ScanConditioner {
 
     /// The next scan ready to go out, in order.
     pub(crate) fn next_ready(&mut self) -> Option<LaserReading> {
-        let reading = self.clock.next_ready()?;
+        let mut reading = self.clock.next_ready()?;
+        // A code found while the scan waited in the warm-up.
+        self.codes.mark(&mut reading);
         self.emitted += 1;
         Some(match &mut self.slips {
             Some(guard) => guard.mend(reading),
@@ -50,8 +64,29 @@ impl ScanConditioner {
 
     /// What was decided and mended, in `metrics.json`.
     pub(crate) fn report(&self, out: &mut Emitter) {
+        report_codes(&self.codes, out);
         report_clock(&self.clock, self.emitted, out);
         report_slips(self.slips.as_ref(), out);
+    }
+}
+
+/// The no-return codes in `metrics.json`: how many are known below the
+/// declared range (`no_return_codes`), each band (`no_return_code_K_from_m`,
+/// `_to_m`, lowest first), the readings marked, and the scans read when
+/// the first was found.
+fn report_codes(codes: &NoReturnCodes, out: &mut Emitter) {
+    let bands = codes.bands();
+    if !codes.detects() && bands.is_empty() {
+        return;
+    }
+    out.count("no_return_codes", bands.len() as u64);
+    for (k, band) in bands.iter().enumerate() {
+        out.measured(&format!("no_return_code_{}_from_m", k + 1), band.from);
+        out.measured(&format!("no_return_code_{}_to_m", k + 1), band.to);
+    }
+    out.count("no_return_readings_marked", codes.marked());
+    if let Some(after) = codes.found_after_scans() {
+        out.count("no_return_code_found_after_scans", after);
     }
 }
 

@@ -16,6 +16,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 use squall_core::clock::{ClockMode, ScanClock};
+use squall_core::no_return::NoReturnMode;
 use squall_core::sensor::{LaserReading, Odometry};
 use squall_topology::{
     BoxError, Declarer, Emitter, ParamError, Params, ReadingCounter, Spout, SpoutStatus, TaskContext,
@@ -53,6 +54,11 @@ struct CarmenParams {
     /// true).
     #[serde(default = "mend_slips_by_default")]
     mend_slips: bool,
+    /// The readings that mean no return: `"auto"` (the default: codes
+    /// found in the data), `"declared"` or `[[from, to], ...]` metres
+    /// ([`NoReturnMode`]).
+    #[serde(default)]
+    no_return: NoReturnMode,
 }
 
 fn mend_slips_by_default() -> bool {
@@ -97,7 +103,7 @@ impl CarmenSpout {
             options: ReadOptions { default_range_max: range_max, skip_bad: params.skip_bad },
             max_scans: params.max_scans,
             reader: None,
-            front: ScanConditioner::new(clock, params.mend_slips),
+            front: ScanConditioner::new(&params.no_return, clock, params.mend_slips),
             scans: 0,
             readings: ReadingCounter::default(),
         })

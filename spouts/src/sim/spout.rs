@@ -6,6 +6,7 @@ use std::collections::VecDeque;
 
 use serde::Deserialize;
 use squall_core::clock::{ClockMode, ScanClock};
+use squall_core::no_return::NoReturnMode;
 use squall_core::sensor::{LaserReading, Odometry, PoseStamped};
 use squall_topology::bounds::{MemoryBudget, OverBudget};
 use squall_topology::spec::readable_number;
@@ -57,6 +58,9 @@ struct P {
     /// Mend steps where the wheels slipped, as the log sources (off by
     /// default).
     mend_slips: bool,
+    /// The readings that mean no return, as the log sources
+    /// ([`NoReturnMode`]; the default `"auto"`).
+    no_return: NoReturnMode,
 }
 
 impl Default for P {
@@ -75,6 +79,7 @@ impl Default for P {
             faults: Faults::default(),
             clock_offset: ClockMode::default(),
             mend_slips: false,
+            no_return: NoReturnMode::default(),
         }
     }
 }
@@ -145,7 +150,11 @@ impl SimSpout {
             config,
             sim: None,
             // A simulated robot is live: its scans flow through the warm-up.
-            front: ScanConditioner::new(ScanClock::flowing(params.clock_offset), params.mend_slips),
+            front: ScanConditioner::new(
+                &params.no_return,
+                ScanClock::flowing(params.clock_offset),
+                params.mend_slips,
+            ),
             truths: VecDeque::new(),
             readings: ReadingCounter::default(),
         })
