@@ -36,7 +36,8 @@ pub struct MeasuredStep {
     pub covariance: Mat3,
 }
 
-/// Iterations of pairing and Gauss–Newton.
+/// Iterations of pairing and Gauss–Newton, at most (a match that has
+/// [`SETTLED`] stops early).
 const ITERATIONS: usize = 25;
 /// Pairing distance at the start, metres; halved every
 /// [`SHRINK_EVERY`] iterations down to [`LAST_PAIRING`].
@@ -47,6 +48,11 @@ const LAST_PAIRING: Real = 0.08;
 /// smaller eigenvalue of their scatter at most this share of the larger.
 const LINE_POINTS: usize = 5;
 const FLATNESS: Real = 0.05;
+/// The Gauss–Newton step (m, rad) below which a match has settled: the
+/// iterations left would change only the last bits. (A micrometre saves
+/// twice the time but moves the filter's results:
+/// docs/results/slam-speed.md.)
+const SETTLED: Real = 1e-12;
 /// Fewest pairs a match is made from.
 const MIN_PAIRS: usize = 10;
 /// The grid's cell, metres: the first pairing distance, so a point's
@@ -62,7 +68,9 @@ const LINE_RINGS: i64 = 4;
 /// `order[starts[c]..starts[c + 1]]`, in index order.
 struct Reference {
     points: Vec<(Real, Real)>,
-    normals: Vec<Option<(Real, Real)>>,
+    /// Each point's line normal, fitted the first time the point is paired
+    /// (`None` until then): most of a scan's points never are.
+    normals: Vec<Option<Option<(Real, Real)>>>,
     /// The grid's first cell and its size in cells.
     corner: (i64, i64),
     size: (i64, i64),
@@ -98,9 +106,18 @@ impl Reference {
             order[*slot as usize] = i as u32;
             *slot += 1;
         }
-        let mut reference = Reference { points, normals: Vec::new(), corner, size, starts, order };
-        reference.normals = (0..reference.points.len()).map(|i| reference.normal_at(i)).collect();
-        reference
+        let normals = vec![None; points.len()];
+        Reference { points, normals, corner, size, starts, order }
+    }
+
+    /// The line normal at point `i` (see [`Self::normal_at`]), fitted once.
+    fn normal(&mut self, i: usize) -> Option<(Real, Real)> {
+        if let Some(n) = self.normals[i] {
+            return n;
+        }
+        let n = self.normal_at(i);
+        self.normals[i] = Some(n);
+        n
     }
 
     /// Indices of the points in the cell `c` (none outside the grid).
@@ -197,7 +214,7 @@ pub fn match_scans(from: &LaserReading, to: &LaserReading) -> Option<MeasuredSte
 /// As [`match_scans`], starting from `guess` (the motion in `from`'s
 /// frame) instead of the odometry's.
 pub fn match_scans_from(from: &LaserReading, to: &LaserReading, guess: Pose2) -> Option<MeasuredStep> {
-    let reference = Reference::new(points_of(from));
+    let mut reference = Reference::new(points_of(from));
     let moving = points_of(to);
     let (mut x, mut y, mut theta) = (guess.x, guess.y, guess.theta);
     let mut last = None;
@@ -208,10 +225,10 @@ pub fn match_scans_from(from: &LaserReading, to: &LaserReading, guess: Pose2) ->
         for &(px, py) in &moving {
             let p = (x + c * px - s * py, y + s * px + c * py);
             let Some((i, d2)) = reference.nearest(p) else { continue };
-            let Some(n) = reference.normals[i] else { continue };
             if d2 >= pairing * pairing {
                 continue;
             }
+            let Some(n) = reference.normal(i) else { continue };
             let q = reference.points[i];
             // Residual: the distance along the normal; its derivative in
             // (x, y, θ).
@@ -237,6 +254,11 @@ pub fn match_scans_from(from: &LaserReading, to: &LaserReading, guess: Pose2) ->
         let d = apply(&inv, g);
         (x, y, theta) = (x - d[0], y - d[1], theta - d[2]);
         last = Some((h, squares / pairs as Real));
+        // At the last pairing distance a step this small leaves the pairs
+        // as they are: the remaining iterations would repeat this one.
+        if pairing <= LAST_PAIRING && d.iter().all(|v| v.abs() < SETTLED) {
+            break;
+        }
     }
     let (h, variance) = last?;
     let mut regularised = h;
