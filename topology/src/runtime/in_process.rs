@@ -26,10 +26,19 @@ pub fn run(topology: &Topology, options: &RunOptions) -> Result<RunReport, RunEr
     let threads = spawn_tasks(topology, &mut wiring, options, runtime.handle(), &events_tx, &|_, _| true)?;
     drop(events_tx);
     let failure = Coordinator::new(topology, &wiring).drive(&events, options);
-    let outcomes = join_tasks(threads, failure.is_none())
+    let mut outcomes = join_tasks(threads, failure.is_none())
         .into_iter()
         .map(|c| c.into_iter().map(|o| o.unwrap_or_else(lost_outcome)).collect())
         .collect::<Vec<Vec<_>>>();
+    // A consumer counts its queues' losses when its thread ends; a producer
+    // ending after it (a failed run) may still add its abandoned batch
+    // there. Every thread has ended (or been left behind): count them as
+    // they stand.
+    for (c, tasks) in outcomes.iter_mut().enumerate() {
+        for (t, outcome) in tasks.iter_mut().enumerate() {
+            (outcome.dropped, outcome.undelivered) = wiring.queue_losses(c, t);
+        }
+    }
     runtime.shutdown_background();
     let report = build_report(topology, &outcomes, started.elapsed());
     if let Some(live) = &options.live {

@@ -53,6 +53,20 @@ pub(crate) struct Hop {
 pub(crate) type Elsewhere<'a> = &'a dyn Fn(&Hop) -> Option<Target>;
 
 impl Wiring {
+    /// The tuples dropped and undelivered at task `t` of component `c`'s
+    /// input queues, as they stand: read once every thread has ended, so
+    /// that a producer that ended after its consumer (and counted its
+    /// held batch as undelivered there) is counted too.
+    pub(crate) fn queue_losses(&self, c: usize, t: usize) -> (u64, u64) {
+        self.inboxes.get(c).and_then(|tasks| tasks.get(t)).map_or((0, 0), |queues| {
+            let sum = |f: fn(&EdgeQueue) -> u64| queues.iter().map(|q| f(q)).sum::<u64>();
+            (
+                sum(|q| q.counters.dropped.load(Ordering::Relaxed)),
+                sum(|q| q.counters.undelivered.load(Ordering::Relaxed)),
+            )
+        })
+    }
+
     /// Every task's queues and emitter; a hop to a task in another process
     /// gets the target `elsewhere` gives it.
     pub(crate) fn build(topology: &Topology, options: &RunOptions, elsewhere: Elsewhere<'_>) -> Self {
