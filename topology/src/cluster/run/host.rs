@@ -191,7 +191,10 @@ impl HostRun {
         let mut out = Vec::new();
         for (c, tasks) in join_tasks(threads, clean).into_iter().enumerate() {
             for (t, outcome) in tasks.into_iter().enumerate() {
-                if let Some(o) = outcome {
+                if let Some(mut o) = outcome {
+                    // As in-process: a producer that ended after its
+                    // consumer added its abandoned batch to the queue.
+                    (o.dropped, o.undelivered) = self.wiring.queue_losses(c, t);
                     out.push((c, t, o));
                 }
             }
