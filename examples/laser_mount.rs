@@ -14,6 +14,9 @@
 //!
 //! `cargo run --release --example laser_mount -- LOG.clf [OFFSET_SECS]`
 //!
+//! `TURNED=RAD` in the environment sets the least turn of a pair used
+//! (default 0.03; 0 uses every pair, for the distance scale).
+//!
 //! See docs/decisions/0038.
 
 use squall_core::geometry::{Pose2, Real, normalize_angle};
@@ -50,19 +53,12 @@ fn main() {
     }
     let declared = scans.first().map(|s| s.laser_offset).unwrap_or(Pose2::IDENTITY);
     let use_stream = track.len() > 1;
-    let pose_at = |s: &LaserReading, k: usize| -> Option<Pose2> {
-        if use_stream {
-            track.at(s.stamp + offset)
-        } else {
-            let _ = k;
-            Some(s.odometry)
-        }
-    };
+    let pose_at = |s: &LaserReading| if use_stream { track.at(s.stamp + offset) } else { Some(s.odometry) };
     // Normal equations of [s, mx, my].
     let mut rows: Vec<([Real; 3], [Real; 3], Real, Real)> = Vec::new();
     for k in 0..scans.len().saturating_sub(1) {
         let (a, b) = (&scans[k], &scans[k + 1]);
-        let (Some(pa), Some(pb)) = (pose_at(a, k), pose_at(b, k + 1)) else { continue };
+        let (Some(pa), Some(pb)) = (pose_at(a), pose_at(b)) else { continue };
         let odo = pb.relative_to(&pa);
         let turned = std::env::var("TURNED").ok().and_then(|v| v.parse().ok()).unwrap_or(TURNED);
         if odo.theta.abs() < turned {

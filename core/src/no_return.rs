@@ -130,6 +130,8 @@ pub struct NoReturnCodes {
     /// the last sample that counted there.
     scans: Vec<u32>,
     last_counted: Vec<u32>,
+    /// Scratch for the search's prefix sums, kept between searches.
+    prefix: Vec<u64>,
     samples: u32,
     last_sample: Option<(Real, Real)>,
     /// Scans read when the first code was found.
@@ -152,6 +154,7 @@ impl NoReturnCodes {
             beams: Vec::new(),
             scans: Vec::new(),
             last_counted: Vec::new(),
+            prefix: Vec::new(),
             samples: 0,
             last_sample: None,
             found_after: None,
@@ -243,10 +246,13 @@ impl NoReturnCodes {
             return;
         }
         // Prefix sums: the beams in bins a..b are at[b] - at[a].
-        let mut at = Vec::with_capacity(n + 1);
+        let mut at = std::mem::take(&mut self.prefix);
+        at.clear();
         at.push(0u64);
+        let mut total = 0;
         for &c in &self.beams {
-            at.push(at.last().copied().unwrap_or(0) + u64::from(c));
+            total += u64::from(c);
+            at.push(total);
         }
         let sum = |a: usize, b: usize| at[b.min(n)] - at[a.min(n)];
         let window = 2 * WINDOW_HALF_BINS + 1;
@@ -283,6 +289,7 @@ impl NoReturnCodes {
             self.beams[lo..hi.min(n)].fill(0);
             b = hi;
         }
+        self.prefix = at;
     }
 
     fn add_band(&mut self, band: RangeBand) {

@@ -667,11 +667,12 @@ fn finish_thread(
         live.publish_detail(&common.emitter.stats);
         live.exit();
     }
-    let sum = |f: fn(&EdgeQueue) -> u64| inbox.iter().map(|q| f(q)).sum::<u64>();
     let outcome = TaskOutcome {
         stats: std::mem::take(&mut common.emitter.stats),
-        dropped: sum(|q| q.counters.dropped.load(Ordering::Relaxed)),
-        undelivered: sum(|q| q.counters.undelivered.load(Ordering::Relaxed)),
+        // The host reads its queues' losses once every thread has ended
+        // (`Wiring::queue_losses`): a producer may add to them after this.
+        dropped: 0,
+        undelivered: 0,
         queue_depth_max: inbox.iter().map(|q| q.max_depth()).max().unwrap_or(0),
         lost: false,
     };
