@@ -16,9 +16,11 @@ use super::{EXIT_FAILED, EXIT_INVALID};
 
 #[derive(Debug, clap::Args)]
 pub(super) struct SimArgs {
-    /// The world: `office` or `campus` (a 320 × 220 m open site; both
-    /// generated from the seed) or a line-map file (`x1,y1,x2,y2` per
-    /// line, metres).
+    /// The world: `office`, `campus` (a 320 × 220 m open site) or `ring`
+    /// (one corridor, 230–300 m round, about a block of rooms: a loop
+    /// that closes only after the odometry has drifted far), each
+    /// generated from the seed, or a line-map file (`x1,y1,x2,y2` per line,
+    /// metres).
     #[arg(long, default_value = "office")]
     world: String,
     /// Simulated seconds.

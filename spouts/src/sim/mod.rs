@@ -5,6 +5,7 @@ pub mod campus;
 pub mod office;
 pub mod output;
 pub mod people;
+pub mod ring;
 pub mod roadmap;
 pub mod robot;
 mod spout;
@@ -39,16 +40,20 @@ pub fn top_speed_for(world: &str) -> f64 {
 }
 
 /// The line-map file a world name names (`None` for the generated
-/// worlds, `office` and `campus`): what a simulation reads.
+/// worlds, `office`, `campus` and `ring`): what a simulation reads.
 pub fn world_file(world: &str) -> Option<&std::path::Path> {
-    (world != "office" && world != CAMPUS_WORLD).then(|| std::path::Path::new(world))
+    (world != "office" && world != CAMPUS_WORLD && world != ring::RING_WORLD)
+        .then(|| std::path::Path::new(world))
 }
 
-/// The floor for a world name: `office` or `campus` (generated from
+/// The floor for a world name: `office`, `campus` or `ring` (generated from
 /// `seed`) or the path of a line-map file (with a roadmap through it).
 pub fn floor_for(world: &str, seed: u64) -> Result<office::Floor> {
     if world == "office" {
         return Ok(office::office(seed, 3, 2));
+    }
+    if world == ring::RING_WORLD {
+        return Ok(ring::ring(seed));
     }
     if world == CAMPUS_WORLD {
         return campus::campus(seed).map_err(|source| Error::Roadmap { world: world.to_string(), source });

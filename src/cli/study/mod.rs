@@ -73,7 +73,8 @@ pub(super) struct StudyArgs {
     #[arg(long, value_name = "S", default_value_t = 8.0, requires = "maps", value_parser = crate::cli::numbers::sim_instant)]
     kidnap_at: f64,
     /// Simulated worlds to study as well, comma-separated: `office`,
-    /// `campus` (a large open site, 80 m laser) or line-map files. Each
+    /// `campus` (a large open site, 80 m laser), `ring` (one long loop) or
+    /// line-map files. Each
     /// becomes a log per `--odometry` quality (simulator seed 1,
     /// `--sim-duration` seconds) under `DIR/worlds`.
     #[arg(long, value_name = "office,campus,MAP.txt", value_delimiter = ',')]
