@@ -1199,15 +1199,16 @@ fn slam_on_an_aces_prefix_writes_maps_and_a_good_trajectory() {
     assert!(matcher["custom"]["matcher_heading_noise_mrad"].as_u64().is_some(), "{matcher}");
     // Map memory is sampled at the first update and every tenth after, and
     // tiles cloned are reported per reading: one value per update; the maps
-    // grow (a resampling may shrink them: copies share tiles), the final
-    // size is close to the largest seen (nine readings add a few tiles), and
-    // the clones add up to the total.
+    // grow (a resampling may shrink them: copies share tiles), so the final
+    // size is at least about the largest sampled and of its order (the
+    // readings after the last sample may still enter new ground), and the
+    // clones add up to the total.
     let updates = matcher["custom"]["update_us"]["count"].as_u64().unwrap();
     let memory = &matcher["custom"]["map_bytes_per_reading"];
     assert_eq!(memory["count"].as_u64().unwrap(), updates.div_ceil(10), "{matcher}");
     let final_bytes = matcher["custom"]["map_bytes"].as_f64().unwrap();
     let largest = memory["max"].as_f64().unwrap();
-    assert!(largest > 0.97 * final_bytes, "{matcher}");
+    assert!(largest <= 1.03 * final_bytes && largest > 0.5 * final_bytes, "{matcher}");
     assert!(memory["p50"].as_f64().unwrap() < largest, "the maps grow: {matcher}");
     let resampler = m["components"].as_array().unwrap().iter().find(|c| c["name"] == "resampler").unwrap();
     let clones = &resampler["custom"]["tiles_cloned_per_reading"];
