@@ -178,25 +178,32 @@ impl Reference {
             let (dx, dy) = (self.points[j].0 - mx, self.points[j].1 - my);
             (sxx, sxy, syy) = (sxx + dx * dx, sxy + dx * dy, syy + dy * dy);
         }
-        // Eigenvalues of the 2 × 2 scatter; the normal is the smaller's
-        // eigenvector.
-        let half_trace = 0.5 * (sxx + syy);
-        let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
-        let (small, large) = (half_trace - root, half_trace + root);
+        // The normal is the scatter's eigenvector of the smaller eigenvalue.
+        let (small, large, normal) = smaller_eigen(sxx, sxy, syy);
         if large <= 1e-12 || small > FLATNESS * large {
             return None;
         }
-        // (sxy, small − sxx) solves (S − small·I) v = 0 unless it vanishes.
-        let (vx, vy) = if sxy.abs() > 1e-15 {
-            (sxy, small - sxx)
-        } else if sxx < syy {
-            (1.0, 0.0)
-        } else {
-            (0.0, 1.0)
-        };
-        let norm = vx.hypot(vy);
-        Some((vx / norm, vy / norm))
+        Some(normal)
     }
+}
+
+/// The eigenvalues (smaller, larger) of the symmetric 2 × 2 matrix
+/// [[a, b], [b, c]] and the unit eigenvector of the smaller.
+fn smaller_eigen(a: Real, b: Real, c: Real) -> (Real, Real, (Real, Real)) {
+    let half_trace = 0.5 * (a + c);
+    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
+    let (small, large) = (half_trace - root, half_trace + root);
+    // (b, small − a) solves (M − small·I) v = 0 unless b vanishes; then
+    // the axes are the eigenvectors.
+    let (vx, vy) = if b.abs() > 1e-15 {
+        (b, small - a)
+    } else if a < c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let norm = vx.hypot(vy);
+    (small, large, (vx / norm, vy / norm))
 }
 
 /// The returning beams' end points of `scan` in the robot's frame.
@@ -284,15 +291,11 @@ const UNMEASURED: Real = 1.0;
 /// facing each way. Along a corridor the smaller counts only the few
 /// points on door jambs and pillars, often one or two; the residuals of
 /// so few say nothing of how far off the match may be along it, and it is
-/// often a tenth of a metre off while its fit claims a centimetre
-/// (a simulated 100 m corridor with 10 Hz scans: 400 steps in 12 000 taken
-/// for wheel slips, decision 0039). Such a direction is reported as not
-/// measured.
+/// often a tenth of a metre off while its fit claims a centimetre (on
+/// the simulated `ring`'s corridors, 391 steps of 12 000 taken for wheel
+/// slips, decision 0039). Such a direction is reported as not measured.
 fn unmeasured_directions(h: &Mat3, covariance: &mut Mat3) {
-    let (a, b, c) = (h[0][0], h[0][1], h[1][1]);
-    let half_trace = 0.5 * (a + c);
-    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
-    let (small, large) = (half_trace - root, half_trace + root);
+    let (small, large, (ux, uy)) = smaller_eigen(h[0][0], h[0][1], h[1][1]);
     if large < MIN_SUPPORT {
         // Neither direction is measured.
         covariance[0][0] += UNMEASURED;
@@ -302,17 +305,6 @@ fn unmeasured_directions(h: &Mat3, covariance: &mut Mat3) {
     if small >= MIN_SUPPORT {
         return;
     }
-    // (b, λ − a) solves (H − λI) v = 0 unless b vanishes; then the axes
-    // are the eigenvectors, and the smaller is x's if a is.
-    let (vx, vy) = if b.abs() > 1e-12 {
-        (b, small - a)
-    } else if a <= c {
-        (1.0, 0.0)
-    } else {
-        (0.0, 1.0)
-    };
-    let norm = vx.hypot(vy);
-    let (ux, uy) = (vx / norm, vy / norm);
     covariance[0][0] += UNMEASURED * ux * ux;
     covariance[0][1] += UNMEASURED * ux * uy;
     covariance[1][0] += UNMEASURED * ux * uy;

@@ -66,7 +66,8 @@ impl Floor {
     }
 }
 
-fn wall(walls: &mut Vec<Segment>, a: (Real, Real), b: (Real, Real)) {
+/// Pushes the wall from `a` to `b`.
+pub(crate) fn wall(walls: &mut Vec<Segment>, a: (Real, Real), b: (Real, Real)) {
     walls.push(Segment { a, b });
 }
 

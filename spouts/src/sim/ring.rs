@@ -13,20 +13,16 @@ use squall_core::geometry::Real;
 use squall_core::linemap::{LineMap, Segment};
 use squall_core::random::stream_for_purpose;
 
-use super::office::{CORRIDOR_WIDTH, Floor, Route, rect};
+use super::office::{CORRIDOR_WIDTH, Floor, Route, rect, wall};
 
 /// The generated loop's world name.
 pub const RING_WORLD: &str = "ring";
 
+/// A room's door, metres (an interior door; the office's are 1 m).
 const DOOR_WIDTH: Real = 0.9;
 
 /// How deep the rooms along the corridor reach into the block, metres.
 const ROOM_DEPTH: Real = 6.0;
-
-/// Pushes the wall from `a` to `b`.
-fn wall(walls: &mut Vec<Segment>, a: (Real, Real), b: (Real, Real)) {
-    walls.push(Segment { a, b });
-}
 
 /// One long side of the block: rooms of random widths along the wall from
 /// `x0` to `x1` at height `y`, reaching `depth` metres into the block
